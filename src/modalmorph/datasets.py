@@ -1,0 +1,43 @@
+"""Real shapes bundled with modalmorph (see ``data/README.md`` for origin and licences)."""
+
+from __future__ import annotations
+
+from importlib import resources
+
+import numpy as np
+
+__all__ = ["load_hand", "load_heart", "data_path"]
+
+_HEART = {
+    "diastole": "SC-HF-I-07-IM-0001-0080-icontour-manual.csv",
+    "systole": "SC-HF-I-07-IM-0001-0087-icontour-manual.csv",
+}
+
+
+def data_path(*parts: str):
+    """Path of a bundled data file, e.g. ``data_path("hands", "hand-0.csv")``."""
+    return resources.files("modalmorph").joinpath("data", *parts)
+
+
+def _read(path) -> np.ndarray:
+    with path.open("r") as fh:
+        return np.loadtxt(fh, delimiter=",", skiprows=1)
+
+
+def load_hand(i: int = 0) -> np.ndarray:
+    """Outline of hand ``i`` (0-7), shape (1590, 2), in pixels.
+
+    Row ``r`` is the same anatomical point in every hand (ground truth for matching).
+    From the statismo project, University of Basel, BSD-3-Clause.
+    """
+    if i not in range(8):
+        raise ValueError(f"hand index must be 0-7, got {i}")
+    return _read(data_path("hands", f"hand-{i}.csv"))
+
+
+def load_heart(phase: str = "diastole") -> np.ndarray:
+    """Left-ventricle endocardial contour at ``"diastole"`` (247 nodes) or ``"systole"``
+    (180 nodes), in pixels. Sunnybrook Cardiac Data (Radau et al. 2009), CC0 1.0."""
+    if phase not in _HEART:
+        raise ValueError(f"phase must be 'diastole' or 'systole', got {phase!r}")
+    return _read(data_path("heart", _HEART[phase]))

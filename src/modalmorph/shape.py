@@ -1,0 +1,178 @@
+"""Shapes: ordered node sets in 2D or 3D, validated once at the boundary."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+__all__ = ["Shape", "as_shape", "resample"]
+
+# Two nodes closer than this fraction of the object's RMS radius are "the same node".
+_REPEAT_TOL = 1e-9
+# An object whose RMS radius is below this fraction of its coordinates' magnitude is a point.
+_POINT_TOL = 1e-10
+
+
+@dataclass(frozen=True, eq=False)
+class Shape:
+    """An object to be modelled: an ordered set of ``m`` nodes in 2D or 3D.
+
+    Parameters
+    ----------
+    points : array_like, shape (m, d)
+        Node coordinates, one node per row, ``d`` in {2, 3}, in the user's units.
+    closed : bool, optional
+        For ordered contours (2D, or 3D polylines): whether the last node connects back to
+        the first. Ignored when ``faces`` are given.
+    ordered : bool, optional
+        Whether the row order is meaningful (a contour or polyline). ``False`` for point
+        clouds, whose neighbourhoods then come from ``faces`` or nearest neighbours.
+        Defaults to ``True`` in 2D and to ``False`` in 3D.
+    faces : array_like of int, shape (f, 3), optional
+        Triangles of a 3D surface (indices into ``points``).
+
+    Raises
+    ------
+    ValueError
+        If the points are not finite, not of shape (m, 2) or (m, 3), fewer than 3, contain
+        repeated nodes, or all lie (nearly) at one point.
+    """
+
+    points: np.ndarray
+    closed: bool = True
+    ordered: bool | None = None
+    faces: np.ndarray | None = field(default=None)
+
+    def __post_init__(self):
+        pts = _validate_points(self.points, "points")
+        pts.setflags(write=False)
+        object.__setattr__(self, "points", pts)
+        if self.ordered is None:
+            object.__setattr__(self, "ordered", pts.shape[1] == 2)
+        if self.faces is not None:
+            faces = np.asarray(self.faces)
+            integer = np.issubdtype(faces.dtype, np.integer)
+            if faces.ndim != 2 or faces.shape[1] != 3 or not integer:
+                raise ValueError(f"faces must be an integer array of shape (f, 3), got "
+                                 f"{faces.dtype} {faces.shape}")
+            if faces.size and (faces.min() < 0 or faces.max() >= len(pts)):
+                raise ValueError(f"faces index nodes outside 0..{len(pts) - 1}")
+            faces = faces.astype(np.intp)
+            faces.setflags(write=False)
+            object.__setattr__(self, "faces", faces)
+
+    @property
+    def m(self) -> int:
+        """Number of nodes."""
+        return self.points.shape[0]
+
+    @property
+    def dim(self) -> int:
+        """Spatial dimension, 2 or 3."""
+        return self.points.shape[1]
+
+    @cached_property
+    def centroid(self) -> np.ndarray:
+        """Mean of the nodes, shape (d,)."""
+        return self.points.mean(axis=0)
+
+    @cached_property
+    def size(self) -> float:
+        """RMS distance of the nodes to their centroid (the object's size)."""
+        return float(np.sqrt(np.mean(np.sum((self.points - self.centroid) ** 2, axis=1))))
+
+    @cached_property
+    def normalized(self) -> np.ndarray:
+        """Nodes centred on their centroid and scaled to unit RMS radius, shape (m, d).
+
+        Every physical computation runs on these, so results do not depend on where the
+        object is or on the units of its coordinates.
+        """
+        out = (self.points - self.centroid) / self.size
+        out.setflags(write=False)
+        return out
+
+    @cached_property
+    def spacing(self) -> float:
+        """Mean nearest-neighbour distance in normalised units (see :attr:`normalized`)."""
+        dist, _ = cKDTree(self.normalized).query(self.normalized, k=2)
+        return float(dist[:, 1].mean())
+
+    def to_user(self, normalized_points: np.ndarray) -> np.ndarray:
+        """Map points from this shape's normalised frame back to the user's coordinates."""
+        return np.asarray(normalized_points) * self.size + self.centroid
+
+    def to_normalized(self, points: np.ndarray) -> np.ndarray:
+        """Map points in the user's coordinates into this shape's normalised frame."""
+        return (np.asarray(points, dtype=np.float64) - self.centroid) / self.size
+
+    def with_points(self, points: np.ndarray) -> Shape:
+        """The same topology (closed, ordered, faces) on other node coordinates."""
+        return Shape(points, closed=self.closed, ordered=self.ordered, faces=self.faces)
+
+
+def _validate_points(points, name: str) -> np.ndarray:
+    try:
+        pts = np.array(points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be numeric coordinates: {exc}") from None
+    if pts.ndim != 2 or pts.shape[1] not in (2, 3):
+        raise ValueError(f"{name} must have shape (m, 2) or (m, 3), got {pts.shape}")
+    if pts.shape[0] < 3:
+        raise ValueError(f"{name} must have at least 3 nodes, got {pts.shape[0]}")
+    bad = ~np.isfinite(pts).all(axis=1)
+    if bad.any():
+        raise ValueError(f"{name} has non-finite coordinates (NaN or inf) at node(s) "
+                         f"{np.flatnonzero(bad)[:10].tolist()}")
+    centred = pts - pts.mean(axis=0)
+    size = np.sqrt(np.mean(np.sum(centred**2, axis=1)))
+    magnitude = max(1.0, float(np.abs(pts).max()))
+    if size <= _POINT_TOL * magnitude:
+        raise ValueError(f"{name}: all {pts.shape[0]} nodes lie (nearly) at one point")
+    pairs = cKDTree(pts).query_pairs(_REPEAT_TOL * size, output_type="ndarray")
+    if len(pairs):
+        i, j = pairs[0]
+        raise ValueError(f"{name} has repeated nodes: node {i} and node {j} coincide "
+                         f"({len(pairs)} repeated pair(s) in all)")
+    return pts
+
+
+def as_shape(obj, name: str = "shape") -> Shape:
+    """Return ``obj`` if it is a :class:`Shape`, else build one from an (m, d) array."""
+    if isinstance(obj, Shape):
+        return obj
+    try:
+        return Shape(obj)
+    except ValueError as exc:
+        msg = str(exc)
+        raise ValueError(msg.replace("points", name, 1) if msg.startswith("points") else
+                         f"{name}: {msg}") from None
+
+
+def resample(points, n: int, *, closed: bool = True) -> np.ndarray:
+    """Resample a polyline to ``n`` nodes equally spaced by arc length.
+
+    Parameters
+    ----------
+    points : array_like, shape (m, d)
+        Ordered nodes.
+    n : int
+        Number of nodes wanted, >= 3.
+    closed : bool, optional
+        Whether the polyline closes on itself (then the first node is kept and the last
+        segment is included).
+
+    Returns
+    -------
+    ndarray, shape (n, d)
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    if n < 3:
+        raise ValueError(f"n must be >= 3, got {n}")
+    path = np.vstack([pts, pts[:1]]) if closed else pts
+    s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))]
+    t = np.linspace(0.0, s[-1], n, endpoint=not closed)
+    return np.column_stack([np.interp(t, s, path[:, a]) for a in range(pts.shape[1])])

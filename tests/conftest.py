@@ -1,0 +1,37 @@
+"""Shared fixtures: real shapes from ../shared/data (bundled copies in the package)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from modalmorph.datasets import load_hand, load_heart
+from modalmorph.shape import resample
+
+DATA = Path(__file__).parent / "data"
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(20050328)
+
+
+@pytest.fixture(scope="session")
+def hand200():
+    """The first shared hand outline resampled to 200 nodes by arc length."""
+    return resample(load_hand(0), 200)
+
+
+@pytest.fixture(scope="session")
+def hearts():
+    """The shared heart pair: end-diastole (247 nodes), end-systole (180 nodes)."""
+    return load_heart("diastole"), load_heart("systole")
+
+
+def sphere_points(n, rng, *, radii=(1.0, 1.0, 1.0)):
+    """n points on a (deformed) ellipsoid, nearly uniform (Fibonacci lattice) plus jitter."""
+    i = np.arange(n) + 0.5
+    phi = np.arccos(1 - 2 * i / n)
+    theta = np.pi * (1 + 5**0.5) * i
+    p = np.c_[np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)]
+    return p * np.asarray(radii) + 0.01 * rng.standard_normal((n, 3))

@@ -1,0 +1,132 @@
+"""The Gaussian element: closed forms against quadrature, and properties of M and K."""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from modalmorph import POLYETHYLENE, FEModel, Material
+from modalmorph.element import gram_entries, stiffness_entries
+
+from .conftest import sphere_points
+
+
+def _grid(centres, sigma, n):
+    """Uniform grid covering every Gaussian to 9 sigma; the trapezoid rule on a
+    uniform grid is spectrally accurate for Gaussians."""
+    lo = centres.min(axis=0) - 9 * sigma
+    hi = centres.max(axis=0) + 9 * sigma
+    axes = [np.linspace(a, b, n) for a, b in zip(lo, hi, strict=True)]
+    mesh = np.meshgrid(*axes, indexing="ij")
+    x = np.stack([g.ravel() for g in mesh], axis=1)
+    w = np.prod([(b - a) / (n - 1) for a, b in zip(lo, hi, strict=True)])
+    return x, w
+
+
+def _quadrature(centres, sigma, lam, mu, n):
+    """Gamma and the elastic bilinear form by brute-force quadrature of the definitions."""
+    x, w = _grid(centres, sigma, n)
+    diff = x[:, None, :] - centres[None, :, :]  # (q, m, d)
+    g = np.exp(-np.sum(diff**2, axis=2) / (2 * sigma**2))  # (2)
+    dg = -diff / sigma**2 * g[:, :, None]  # dg_i/dx_a, (q, m, d)
+    gamma = w * g.T @ g
+    D = w * np.einsum("qia,qjb->abij", dg, dg)  # D^ab_ij
+    d = centres.shape[1]
+    # a(u, v) = int lambda div u div v + mu (grad u : grad v + grad u : grad v^T)
+    # for u = g_i e_a, v = g_j e_b:
+    K = np.empty((centres.shape[0], centres.shape[0], d, d))
+    for a in range(d):
+        for b in range(d):
+            K[:, :, a, b] = lam * D[a, b] + mu * ((a == b) * np.trace(D) + D[b, a])
+    return gamma, K
+
+
+@pytest.mark.parametrize("d, n", [(2, 301), (3, 61)])
+def test_closed_forms_match_quadrature(d, n, rng):
+    centres = rng.uniform(-1, 1, (5, d))
+    sigma, lam, mu = 0.7, 1.3, 0.8
+    gamma_q, K_q = _quadrature(centres, sigma, lam, mu, n)
+    r = centres[None, :, :] - centres[:, None, :]
+    _, gamma = gram_entries(r, sigma)
+    K = stiffness_entries(r, sigma, lam, mu)
+    # quadrature error of the uniform trapezoid rule on Gaussians is far below 1e-10
+    assert_allclose(gamma, gamma_q, rtol=1e-10, atol=1e-12 * np.abs(gamma_q).max())
+    assert_allclose(K, K_q, rtol=1e-9, atol=1e-10 * np.abs(K_q).max())
+
+
+def test_gram_is_interpolation_basis(hand200):
+    model = FEModel(hand200)
+    G, _ = model.gram
+    assert_allclose(np.diag(G), 1.0)  # h_i(X_j) = delta_ij needs g_i(X_i) = 1
+    assert_allclose(G, G.T)
+
+
+def _check_matrices(model):
+    M, K = model.mass, model.stiffness
+    scale_m, scale_k = np.abs(M).max(), np.abs(K).max()
+    assert_allclose(M, M.T, atol=1e-12 * scale_m)  # symmetric
+    assert_allclose(K, K.T, atol=1e-12 * scale_k)
+    assert np.linalg.eigvalsh(M).min() > 0  # M positive definite
+    # K positive semi-definite, up to round-off relative to its largest eigenvalue
+    ek = np.linalg.eigvalsh(K)
+    assert ek.min() > -1e-10 * ek.max()
+
+
+def test_matrices_hand(hand200):
+    _check_matrices(FEModel(hand200))
+
+
+def test_matrices_heart(hearts):
+    for h in hearts:
+        _check_matrices(FEModel(h))
+
+
+def test_matrices_3d(rng):
+    _check_matrices(FEModel(sphere_points(150, rng, radii=(1.0, 0.7, 0.4))))
+
+
+def test_plane_strain_is_stiffer(hand200):
+    stress = FEModel(hand200, plane="stress").modes(5).frequencies
+    strain = FEModel(hand200, plane="strain").modes(5).frequencies
+    assert np.all(strain > stress)  # lambda >= lambda*, so K grows
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"sigma": 0.0}, "sigma must be a positive"),
+        ({"sigma": np.nan}, "sigma must be a positive"),
+        ({"material": "steel"}, "material must be a Material"),
+        ({"plane": "membrane"}, "plane must be 'stress' or 'strain'"),
+    ],
+)
+def test_bad_options(hand200, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        FEModel(hand200, **kwargs)
+
+
+def test_sigma_too_large_is_reported(hand200):
+    model = FEModel(hand200, sigma=4.0)
+    with pytest.raises(ValueError, match="too large .* numerically singular"):
+        model.modes()
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"E": -1.0, "nu": 0.3, "rho": 1.0}, "E .* must be > 0"),
+        ({"E": 1.0, "nu": 0.5, "rho": 1.0}, r"nu .* must be in \(-1, 0.5\)"),
+        ({"E": 1.0, "nu": 0.3, "rho": 0.0}, "rho .* must be > 0"),
+        ({"E": float("nan"), "nu": 0.3, "rho": 1.0}, "E must be a finite number"),
+    ],
+)
+def test_material_validation(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        Material(**kwargs)
+
+
+def test_polyethylene_preset():
+    assert POLYETHYLENE.name == "polyethylene"
+    lam_star, mu = POLYETHYLENE.lame_2d("stress")
+    E, nu = POLYETHYLENE.E, POLYETHYLENE.nu
+    assert_allclose(lam_star, E * nu / (1 - nu**2))  # plane stress lambda*
+    assert_allclose(mu, E / (2 * (1 + nu)))

@@ -1,0 +1,102 @@
+"""Modes: (13) mass normalisation and orthogonality, invariance, damping (5)."""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from modalmorph import FEModel, rayleigh
+
+from .conftest import sphere_points
+
+
+def _check_modes(model, n=None):
+    modes = model.modes(n)
+    Phi, w2 = modes.shapes, modes.eigenvalues
+    M, K = model.mass, model.stiffness
+    assert np.all(np.diff(modes.frequencies) >= 0)  # ascending
+    # (13), relative error <= 1e-8
+    assert np.abs(Phi.T @ M @ Phi - np.eye(modes.n)).max() <= 1e-8
+    assert np.abs(Phi.T @ K @ Phi - np.diag(w2)).max() <= 1e-8 * w2.max()
+    return modes
+
+
+def test_modes_hand(hand200):
+    _check_modes(FEModel(hand200))
+
+
+def test_modes_heart(hearts):
+    for h in hearts:
+        _check_modes(FEModel(h))
+
+
+def test_modes_3d(rng):
+    _check_modes(FEModel(sphere_points(120, rng, radii=(1.0, 0.8, 0.5))))
+
+
+def test_lowest_subset_matches_full(hand200):
+    model = FEModel(hand200)
+    full = model.modes()
+    low = _check_modes(model, 20)
+    assert_allclose(low.frequencies, full.frequencies[:20], rtol=1e-9)
+    # same subspace up to sign for the well-separated ones
+    overlap = np.abs(np.sum(low.shapes * full.shapes[:, :20], axis=0))
+    norms = np.linalg.norm(low.shapes, axis=0) * np.linalg.norm(full.shapes[:, :20], axis=0)
+    gaps = np.diff(full.frequencies[:21]) / full.frequencies[1:21]
+    separated = (gaps[:20] > 1e-3) & (np.r_[1.0, gaps[:19]] > 1e-3)
+    assert_allclose(overlap[separated] / norms[separated], 1.0, atol=1e-6)
+
+
+def _rotation(d, rng):
+    q, r = np.linalg.qr(rng.standard_normal((d, d)))
+    q = q * np.sign(np.diag(r))
+    if np.linalg.det(q) < 0:
+        q[:, 0] = -q[:, 0]
+    return q
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_frequencies_invariant_to_similarity(d, hand200, rng):
+    pts = hand200 if d == 2 else sphere_points(100, rng, radii=(1.0, 0.6, 0.3))
+    moved = 37.5 * pts @ _rotation(d, rng).T + rng.uniform(-100, 100, d)
+    f0 = FEModel(pts).modes().frequencies
+    f1 = FEModel(moved).modes().frequencies
+    # the model works in the normalised frame: rotation, translation and units vanish
+    assert_allclose(f1, f0, rtol=1e-8)
+
+
+def test_frequencies_scale_with_material(hand200):
+    from modalmorph import Material
+
+    a = FEModel(hand200, material=Material(E=1.0, nu=0.3, rho=1.0)).modes(10).frequencies
+    b = FEModel(hand200, material=Material(E=4.0, nu=0.3, rho=1.0)).modes(10).frequencies
+    assert_allclose(b, 2 * a, rtol=1e-10)  # omega ~ sqrt(E / rho)
+
+
+def test_bad_mode_count(hand200):
+    model = FEModel(hand200)
+    with pytest.raises(ValueError, match="n must be between 1 and 400"):
+        model.modes(401)
+
+
+def test_rayleigh_reproduces_ratios():
+    w1, w2, xi1, xi2 = 2.0, 30.0, 0.005, 0.03
+    alpha, beta = rayleigh(xi1, xi2, w1, w2)
+    xi = lambda w: alpha / (2 * w) + beta * w / 2  # noqa: E731 damping ratio of a mode
+    assert_allclose([xi(w1), xi(w2)], [xi1, xi2], rtol=1e-12)
+
+
+def test_rayleigh_diagonal_in_modes(hand200):
+    model = FEModel(hand200)
+    modes = model.modes()
+    alpha, beta = rayleigh(0.005, 0.03, modes.frequencies[0], modes.frequencies[-1])
+    C = alpha * model.mass + beta * model.stiffness
+    PCP = modes.shapes.T @ C @ modes.shapes
+    expected = alpha + beta * modes.eigenvalues  # Phi^T C Phi = alpha I + beta Omega^2
+    assert np.abs(PCP - np.diag(expected)).max() <= 1e-8 * expected.max()
+
+
+def test_rayleigh_rejects_bad_input():
+    with pytest.raises(ValueError, match="w1 < w2"):
+        rayleigh(0.01, 0.01, 3.0, 3.0)
+    with pytest.raises(ValueError, match="damping ratios must be >= 0"):
+        rayleigh(-0.01, 0.01, 1.0, 3.0)

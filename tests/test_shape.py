@@ -1,0 +1,77 @@
+"""Shape validation: every bad input names its problem."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+from numpy.testing import assert_allclose
+
+from modalmorph import Shape
+from modalmorph.shape import resample
+
+SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+
+
+@pytest.mark.parametrize(
+    "points, match",
+    [
+        (np.array([[0.0, np.nan], [1, 0], [0, 1]]), r"non-finite .* node\(s\) \[0\]"),
+        (np.array([[0.0, 0.0], [1, np.inf], [0, 1]]), r"non-finite .* node\(s\) \[1\]"),
+        (np.zeros((5,)), r"shape \(m, 2\) or \(m, 3\), got \(5,\)"),
+        (np.zeros((5, 4)), r"shape \(m, 2\) or \(m, 3\), got \(5, 4\)"),
+        (np.zeros((5, 1)), r"shape \(m, 2\) or \(m, 3\), got \(5, 1\)"),
+        (SQUARE[:2], "at least 3 nodes, got 2"),
+        (np.vstack([SQUARE, SQUARE[1]]), "repeated nodes: node 1 and node 4"),
+        (np.ones((4, 2)) * 7.0, "all 4 nodes lie \\(nearly\\) at one point"),
+        (np.ones((4, 3)) + 1e-14 * np.arange(12).reshape(4, 3), "nearly\\) at one point"),
+        ([["a", "b"], ["c", "d"], ["e", "f"]], "must be numeric"),
+    ],
+)
+def test_bad_points(points, match):
+    with pytest.raises(ValueError, match=match):
+        Shape(points)
+
+
+def test_bad_faces():
+    pts = np.random.default_rng(0).normal(size=(6, 3))
+    with pytest.raises(ValueError, match="faces index nodes outside"):
+        Shape(pts, faces=[[0, 1, 9]])
+    with pytest.raises(ValueError, match=r"faces must be an integer array of shape \(f, 3\)"):
+        Shape(pts, faces=[[0.0, 1.0, 2.0]])
+
+
+def test_normalisation():
+    s = Shape(SQUARE * 10 + 3)
+    assert_allclose(s.normalized.mean(axis=0), 0, atol=1e-15)
+    assert_allclose(np.sqrt(np.mean(np.sum(s.normalized**2, axis=1))), 1.0)
+    assert_allclose(s.to_user(s.normalized), s.points)
+    assert s.ordered and s.closed
+    assert not Shape(np.eye(3)).ordered  # 3D defaults to a point cloud
+
+
+def test_points_read_only():
+    s = Shape(SQUARE)
+    with pytest.raises(ValueError):
+        s.points[0, 0] = 5.0
+
+
+@settings(max_examples=50, deadline=None)
+@given(arrays(np.float64, st.tuples(st.integers(3, 12), st.sampled_from([2, 3])),
+              elements=st.floats(-1e3, 1e3, allow_nan=False)))
+def test_valid_or_clear_error(points):
+    """Any finite array is either accepted or rejected with a ValueError, never crashes."""
+    try:
+        s = Shape(points)
+    except ValueError as exc:
+        assert "repeated nodes" in str(exc) or "one point" in str(exc)
+    else:
+        assert np.isfinite(s.normalized).all()
+
+
+def test_resample_arc_length():
+    out = resample(SQUARE, 8)
+    steps = np.linalg.norm(np.diff(np.vstack([out, out[:1]]), axis=0), axis=1)
+    assert_allclose(steps, 0.5)  # perimeter 4 in 8 equal steps
+    with pytest.raises(ValueError, match="n must be >= 3"):
+        resample(SQUARE, 2)
