@@ -1,0 +1,145 @@
+"""Horn's closed-form similarity between corresponding point sets (method.md §3).
+
+Horn (1987), "Closed-form solution of absolute orientation using unit quaternions": centre
+both sets, form the cross-covariance ``S`` and the symmetric 4 x 4 matrix ``N``; the
+rotation is the unit quaternion of ``N``'s largest eigenvalue, the symmetric scale is
+``s = sqrt(sum |r'_r|^2 / sum |r'_l|^2)`` and the translation ``t = mean_r - s R mean_l``.
+A 2D problem is the 3D one with ``z = 0``, restricted to rotations about ``z``; so the
+result is always a proper rotation, never a reflection.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Similarity", "align"]
+
+
+@dataclass(frozen=True, eq=False)
+class Similarity:
+    """The map ``x -> scale * rotation @ x + translation``.
+
+    Attributes
+    ----------
+    rotation : ndarray, shape (d, d)
+        Proper rotation (orthogonal, determinant +1).
+    scale : float
+        Positive scale factor.
+    translation : ndarray, shape (d,)
+    """
+
+    rotation: np.ndarray
+    scale: float
+    translation: np.ndarray
+
+    @property
+    def dim(self) -> int:
+        return self.rotation.shape[0]
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """Homogeneous matrix, shape (d + 1, d + 1)."""
+        d = self.dim
+        out = np.eye(d + 1)
+        out[:d, :d] = self.scale * self.rotation
+        out[:d, d] = self.translation
+        return out
+
+    def apply(self, points) -> np.ndarray:
+        """Transform points of shape (m, d) (or one point (d,)); returns the same shape."""
+        p = np.asarray(points, dtype=np.float64)
+        if p.shape[-1] != self.dim:
+            raise ValueError(f"points must have {self.dim} coordinates per row, got "
+                             f"shape {p.shape}")
+        return self.scale * p @ self.rotation.T + self.translation
+
+    def inverse(self) -> Similarity:
+        """The similarity that undoes this one."""
+        rt = self.rotation.T
+        return Similarity(rotation=rt, scale=1.0 / self.scale,
+                          translation=-(rt @ self.translation) / self.scale)
+
+    @classmethod
+    def identity(cls, dim: int) -> Similarity:
+        return cls(rotation=np.eye(dim), scale=1.0, translation=np.zeros(dim))
+
+
+def _quaternion_matrix(S: np.ndarray) -> np.ndarray:
+    """Horn's symmetric 4 x 4 matrix N from the 3 x 3 cross-covariance S."""
+    (sxx, sxy, sxz), (syx, syy, syz), (szx, szy, szz) = S
+    return np.array([
+        [sxx + syy + szz, syz - szy, szx - sxz, sxy - syx],
+        [syz - szy, sxx - syy - szz, sxy + syx, szx + sxz],
+        [szx - sxz, sxy + syx, -sxx + syy - szz, syz + szy],
+        [sxy - syx, szx + sxz, syz + szy, -sxx - syy + szz],
+    ])
+
+
+def _rotation_from_quaternion(q: np.ndarray) -> np.ndarray:
+    q0, qx, qy, qz = q / np.linalg.norm(q)
+    return np.array([
+        [q0**2 + qx**2 - qy**2 - qz**2, 2 * (qx * qy - q0 * qz), 2 * (qx * qz + q0 * qy)],
+        [2 * (qy * qx + q0 * qz), q0**2 - qx**2 + qy**2 - qz**2, 2 * (qy * qz - q0 * qx)],
+        [2 * (qz * qx - q0 * qy), 2 * (qz * qy + q0 * qx), q0**2 - qx**2 - qy**2 + qz**2],
+    ])
+
+
+def align(source_points, target_points, *, scale: bool = True) -> Similarity:
+    """Similarity that best maps ``source_points`` onto ``target_points`` (Horn, 1987).
+
+    Minimises ``sum |target_i - (s R source_i + t)|^2`` over proper rotations ``R`` (the
+    scale is Horn's symmetric one, exact when the sets are similar).
+
+    Parameters
+    ----------
+    source_points, target_points : array_like, shape (k, d)
+        Corresponding points (row ``i`` of one matches row ``i`` of the other), ``d`` in
+        {2, 3}, ``k >= 2``.
+    scale : bool, optional
+        Estimate the scale (default); ``False`` fixes it at 1 (a rigid motion).
+
+    Returns
+    -------
+    Similarity
+
+    Raises
+    ------
+    ValueError
+        If the arrays differ in shape, are not (k, 2) or (k, 3), are not finite, have fewer
+        than 2 points, or the source points all coincide.
+    """
+    left = np.asarray(source_points, dtype=np.float64)
+    right = np.asarray(target_points, dtype=np.float64)
+    for name, a in (("source_points", left), ("target_points", right)):
+        if a.ndim != 2 or a.shape[1] not in (2, 3):
+            raise ValueError(f"{name} must have shape (k, 2) or (k, 3), got {a.shape}")
+        if not np.isfinite(a).all():
+            raise ValueError(f"{name} must be finite (no NaN or inf)")
+    if left.shape != right.shape:
+        raise ValueError(f"source_points and target_points must have the same shape, got "
+                         f"{left.shape} and {right.shape}")
+    k, d = left.shape
+    if k < 2:
+        raise ValueError(f"align needs at least 2 corresponding points, got {k}")
+    mean_l, mean_r = left.mean(axis=0), right.mean(axis=0)
+    cl, cr = left - mean_l, right - mean_r  # centred (section 5.2)
+    norm_l, norm_r = np.sum(cl**2), np.sum(cr**2)
+    if norm_l <= 1e-300:
+        raise ValueError("source_points all coincide: the similarity is undetermined")
+    if d == 2:  # embed with z = 0
+        cl3, cr3 = np.c_[cl, np.zeros(k)], np.c_[cr, np.zeros(k)]
+    else:
+        cl3, cr3 = cl, cr
+    N = _quaternion_matrix(cl3.T @ cr3)  # S_ab = sum l_a r_b
+    if d == 2:  # rotations about z only: quaternions (q0, 0, 0, qz); no reflections
+        sub = N[np.ix_([0, 3], [0, 3])]
+        _, vec = np.linalg.eigh(sub)
+        q = np.array([vec[0, -1], 0.0, 0.0, vec[1, -1]])
+    else:
+        _, vec = np.linalg.eigh(N)
+        q = vec[:, -1]  # eigenvector of the largest eigenvalue
+    R = _rotation_from_quaternion(q)[:d, :d]
+    s = float(np.sqrt(norm_r / norm_l)) if scale else 1.0  # symmetric scale
+    return Similarity(rotation=R, scale=s, translation=mean_r - s * R @ mean_l)
