@@ -1,0 +1,584 @@
+"""Reading shapes from every supported format, writing results, atomic output."""
+
+import json
+import re
+import types
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+import modalmorph
+from modalmorph.io import (
+    DEFAULT_NODES,
+    SUPPORTED_EXTENSIONS,
+    atomic_output_dir,
+    atomic_write,
+    read_shape,
+    save_result,
+    write_points,
+)
+from modalmorph.shape import Shape
+
+# A small non-symmetric 2D contour (a pentagon-ish outline) and a 3D point set.
+SQUARE = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.5, 1.5], [0.0, 1.0]])
+CLOUD = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.5], [0.0, 1.0, 0.25], [1.0, 1.0, 1.0]])
+
+
+def _err(path):
+    """A pattern for a message that starts with this file's name."""
+    return "^" + re.escape(str(path)) + ": "
+
+
+# -- text, arrays, JSON ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("ext", ["csv", "tsv", "txt", "npy", "npz", "json"])
+@pytest.mark.parametrize("points", [SQUARE, CLOUD], ids=["2d", "3d"])
+def test_write_read_round_trip(tmp_path, ext, points):
+    path = tmp_path / f"shape.{ext}"
+    write_points(path, points)
+    shape = read_shape(path)
+    assert_array_equal(shape.points, points)  # written in shortest round-trip form
+    assert shape.closed
+    assert shape.ordered == (points.shape[1] == 2)
+    assert not list(tmp_path.glob(".*"))  # no temporary left behind
+
+
+def test_text_written_with_a_header(tmp_path):
+    write_points(tmp_path / "a.csv", SQUARE)
+    assert (tmp_path / "a.csv").read_text().splitlines()[0] == "x,y"
+    write_points(tmp_path / "a.tsv", CLOUD)
+    assert (tmp_path / "a.tsv").read_text().splitlines()[0] == "x\ty\tz"
+
+
+@pytest.mark.parametrize("text", [
+    "0,0\n2,0\n2,1\n0.5,1.5\n0,1\n",
+    "x,y\n0,0\n2,0\n2,1\n0.5,1.5\n0,1\n",
+    '"x","y"\n"0","0"\n2,0\n2,1\n0.5,1.5\n0,1\n',
+    "X, Y\n0, 0\n2, 0\n\n2, 1\n0.5, 1.5\n0, 1\n",
+    "# outline\n0\t0\n2\t0\n2\t1\n0.5\t1.5\n0\t1\n",
+    "0 0\n2   0\n2 1\n  0.5 1.5\n0 1\n",
+    "x;y\n0;0\n2;0\n2;1\n0,5;1,5\n0;1\n",  # semicolons with decimal commas
+    "\ufeffx,y\r\n0,0\r\n2,0\r\n2,1\r\n0.5,1.5\r\n0,1\r\n",  # BOM and CRLF
+    "id,y,x,label\n1,0,0,a\n2,0,2,b\n3,1,2,c\n4,1.5,0.5,d\n5,1,0,e\n",  # named columns
+    "0,0\n2,0\n2,1\n0.5,1.5\n0,1\n0,0\n",  # closed contour written with its first node
+], ids=["plain", "header", "quoted", "spaces", "tabs", "whitespace", "semicolon", "bom",
+        "named", "repeated-first"])
+def test_text_variants(tmp_path, text):
+    path = tmp_path / "shape.csv"
+    path.write_text(text, encoding="utf-8")
+    assert_array_equal(read_shape(path).points, SQUARE)
+
+
+def test_text_extensions_read_the_same(tmp_path):
+    for ext, sep in [("tsv", "\t"), ("txt", " "), ("csv", ";")]:
+        path = tmp_path / f"s.{ext}"
+        path.write_text("\n".join(sep.join(map(str, row)) for row in CLOUD))
+        shape = read_shape(path)
+        assert_array_equal(shape.points, CLOUD)
+        assert shape.dim == 3 and not shape.ordered
+
+
+def test_npz_key_and_json_object(tmp_path):
+    np.savez(tmp_path / "one.npz", anything=SQUARE)  # the only array
+    assert_array_equal(read_shape(tmp_path / "one.npz").points, SQUARE)
+    np.savez(tmp_path / "two.npz", points=SQUARE, other=np.zeros(3))
+    assert_array_equal(read_shape(tmp_path / "two.npz").points, SQUARE)
+
+    path = tmp_path / "open.json"
+    path.write_text(json.dumps({"points": SQUARE.tolist(), "closed": False}))
+    shape = read_shape(path)
+    assert not shape.closed
+    assert read_shape(path, closed=True).closed  # the argument wins over the file
+
+    faces = [[0, 1, 2], [1, 3, 2]]
+    path.write_text(json.dumps({"points": CLOUD.tolist(), "faces": faces}))
+    assert_array_equal(read_shape(path).faces, faces)
+
+
+def test_shape_round_trip_keeps_topology(tmp_path):
+    surface = Shape(CLOUD, faces=[[0, 1, 2], [1, 3, 2]])
+    contour = Shape(SQUARE, closed=False)
+    for ext in ("json", "npz"):
+        back = read_shape(_written(tmp_path / f"s.{ext}", surface))
+        assert_array_equal(back.faces, surface.faces)
+        assert not read_shape(_written(tmp_path / f"c.{ext}", contour)).closed
+
+
+def _written(path, points):
+    write_points(path, points)
+    return path
+
+
+def test_nodes_resamples_2d_contours(tmp_path):
+    path = _written(tmp_path / "s.csv", SQUARE)
+    shape = read_shape(path, nodes=40)
+    assert shape.m == 40
+    assert_allclose(shape.points[0], SQUARE[0])  # arc-length resampling keeps node 0
+    edges = np.linalg.norm(np.diff(np.vstack([shape.points, shape.points[:1]]), axis=0),
+                           axis=1)
+    # equal spacing by arc length; chords cut corners, so allow a corner's worth
+    assert edges.max() - edges.min() < 0.05
+
+
+# -- SVG -------------------------------------------------------------------------------
+
+_SVG = '<svg xmlns="http://www.w3.org/2000/svg" width="200" height="200">{}</svg>'
+_K = 0.5522847498  # cubic Bézier approximation of a quarter circle
+
+
+def _svg(tmp_path, body, name="shape.svg"):
+    path = tmp_path / name
+    path.write_text(_SVG.format(body))
+    return path
+
+
+def _dist_to_polygon(points, vertices, closed=True):
+    """Distance from each point to the nearest edge of a polygon."""
+    a = vertices
+    b = np.roll(vertices, -1, axis=0) if closed else vertices[1:]
+    a = a[: len(b)]
+    ab = b - a
+    t = np.clip(np.einsum("pkd,kd->pk", points[:, None] - a, ab) / np.sum(ab**2, axis=1),
+                0, 1)
+    nearest = a + t[..., None] * ab
+    return np.linalg.norm(points[:, None] - nearest, axis=2).min(axis=1)
+
+
+@pytest.mark.parametrize("d", [
+    "M 60 100 A 40 40 0 0 1 140 100 A 40 40 0 0 1 60 100 Z",
+    "m60,100a40,40 0 1,1 80,0a40,40 0 1,1 -80,0z",
+    "M100 60 C{a} 60 140 {b} 140 100 S{a} 140 100 140 S60 {a} 60 100 S{b} 60 100 60Z",
+], ids=["arcs", "relative-arcs", "cubic"])
+def test_svg_circle(tmp_path, d):
+    d = d.format(a=100 + 40 * _K, b=100 - 40 * _K)
+    shape = read_shape(_svg(tmp_path, f'<g><path fill="none" d="{d}"/></g>'))
+    assert shape.m == DEFAULT_NODES and shape.closed
+    radius = np.linalg.norm(shape.points - [100, 100], axis=1)
+    # on the circle: exact for arcs, within the Bézier approximation's 0.03 % otherwise
+    assert_allclose(radius, 40, rtol=4e-4)
+    spacing = np.linalg.norm(np.diff(shape.points, axis=0), axis=1)
+    assert_allclose(spacing, 2 * np.pi * 40 / DEFAULT_NODES, rtol=1e-3)  # by arc length
+
+
+def test_svg_polygon_polyline_and_lines(tmp_path):
+    verts = np.array([[10, 10], [90, 10], [90, 60], [50, 90], [10, 60]], dtype=float)
+    pts = " ".join(f"{x},{y}" for x, y in verts)
+    forms = {
+        "polygon": f'<polygon points="{pts}"/>',
+        "absolute": '<path d="M10 10 L90 10 L90 60 L50 90 L10 60 Z"/>',
+        "relative": '<path d="m10 10 h80 v50 l-40 30 -40-30z"/>',
+        "implicit": '<path d="M10,10 90,10 90,60 50,90 10,60 z"/>',
+        "hv": '<path d="M10 10 H90 V60 L50 90 L10 60 V10"/>',
+    }
+    for label, body in forms.items():
+        shape = read_shape(_svg(tmp_path, body, f"{label}.svg"), nodes=64)
+        assert shape.m == 64 and shape.closed, label
+        assert _dist_to_polygon(shape.points, verts).max() < 1e-9, label
+        assert_allclose(shape.points[0], [10, 10], err_msg=label)
+
+    shape = read_shape(_svg(tmp_path, f'<polyline points="{pts}"/>'), nodes=30)
+    assert not shape.closed
+    assert_allclose(shape.points[[0, -1]], verts[[0, -1]])
+    assert _dist_to_polygon(shape.points, verts, closed=False).max() < 1e-9
+
+
+def test_svg_quadratic_and_transform(tmp_path):
+    # a lens: two quadratic arcs (Q then T mirrored), inside translate + scale
+    body = ('<defs><path d="M0 0 L1 1"/></defs>'
+            '<g transform="translate(10, 20)"><path transform="scale(2)" '
+            'd="M0 0 Q 20 20 40 0 T 80 0 L 80 -10 Z"/></g>')
+    shape = read_shape(_svg(tmp_path, body), nodes=100)
+    t = np.linspace(0, 1, 2001)[:, None]
+    first = (1 - t) ** 2 * [0, 0] + 2 * t * (1 - t) * [20, 20] + t**2 * [40, 0]
+    second = (1 - t) ** 2 * [40, 0] + 2 * t * (1 - t) * [60, -20] + t**2 * [80, 0]
+    truth = np.vstack([first, second, [[80, -10]]]) * 2 + [10, 20]
+    dist = np.linalg.norm(shape.points[:, None] - truth[None], axis=2).min(axis=1)
+    on_curves = dist[shape.points[:, 1] > 20.5]  # leave out the closing straight edges
+    assert on_curves.max() < 0.1  # 2001 samples of a curve about 200 long
+    assert_allclose(shape.points[0], [10, 20])
+
+
+def test_svg_several_subpaths_warns(tmp_path):
+    path = _svg(tmp_path, '<path d="M0 0 H10 V10 Z M20 20 H30 V30 Z"/>')
+    with pytest.warns(UserWarning, match="2 subpaths; using the first"):
+        shape = read_shape(path, nodes=12)
+    assert shape.points.max() <= 10
+
+
+@pytest.mark.parametrize("body, message", [
+    ('<circle cx="1" cy="1" r="1"/>', "no <path>, <polygon> or <polyline>"),
+    ('<path d="M 0 0 L 10 x"/>', "<path>: expected a number"),
+    ('<path d="L 0 0 L 10 0"/>', "must start with M"),
+    ('<path d="M 0 0"/>', "has no segments"),
+    ('<polygon points="0,0 1"/>', "odd number of coordinates"),
+    ('<path d="M0 0 L1 0 L1 1" transform="wobble(3)"/>', "unsupported transform"),
+])
+def test_svg_errors(tmp_path, body, message):
+    path = _svg(tmp_path, body)
+    with pytest.raises(ValueError, match=_err(path) + ".*" + re.escape(message)):
+        read_shape(path)
+
+
+def test_svg_not_xml(tmp_path):
+    path = tmp_path / "bad.svg"
+    path.write_text("<svg><path d='M0 0'></svg")
+    with pytest.raises(ValueError, match=_err(path) + "not a valid SVG"):
+        read_shape(path)
+
+
+# -- images ------------------------------------------------------------------------------
+
+
+def _ellipse_mask(shape=(120, 160), centre=(70.0, 50.0), axes=(40.0, 25.0)):
+    """A filled ellipse: centre and semi-axes given as (x, y) = (column, row)."""
+    rows, cols = np.mgrid[: shape[0], : shape[1]]
+    return ((cols - centre[0]) / axes[0]) ** 2 + ((rows - centre[1]) / axes[1]) ** 2 <= 1
+
+
+def _area(points):
+    x, y = points.T
+    return 0.5 * (np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+def _check_ellipse(shape, mask, centre=(70.0, 50.0), axes=(40.0, 25.0)):
+    assert shape.dim == 2 and shape.closed
+    assert_allclose(_area(shape.points), mask.sum(), rtol=0.02)  # contour through edges
+    assert_allclose(shape.points.mean(axis=0), centre, atol=0.5)  # nodes evenly spaced
+    extent = shape.points.max(axis=0) - shape.points.min(axis=0)
+    assert_allclose(extent, 2 * np.array(axes), atol=1.5)  # x = column, y = row
+
+
+@pytest.mark.parametrize("ext", ["png", "tif", "bmp"])
+def test_image_mask(tmp_path, ext):
+    from PIL import Image
+
+    mask = _ellipse_mask()
+    path = tmp_path / f"mask.{ext}"
+    Image.fromarray(mask.astype(np.uint8) * 255).save(path)
+    shape = read_shape(path)
+    assert shape.m == DEFAULT_NODES
+    _check_ellipse(shape, mask)
+    assert read_shape(path, nodes=50).m == 50
+
+
+def test_image_dark_object_one_bit_and_holes(tmp_path):
+    from PIL import Image
+
+    mask = _ellipse_mask()
+    ring = mask & ~_ellipse_mask(axes=(10.0, 8.0))  # a hole: the outer contour is kept
+    small = _ellipse_mask(centre=(145.0, 10.0), axes=(5.0, 5.0))  # a smaller object
+    Image.fromarray(np.where(ring | small, 0, 255).astype(np.uint8)).save(tmp_path / "a.png")
+    _check_ellipse(read_shape(tmp_path / "a.png"), mask)
+    Image.fromarray(ring).save(tmp_path / "b.png")  # a 1-bit image
+    with Image.open(tmp_path / "b.png") as image:
+        assert image.mode == "1"
+    _check_ellipse(read_shape(tmp_path / "b.png"), mask)
+
+
+def test_image_grey_with_threshold(tmp_path, rng):
+    from PIL import Image
+
+    mask = _ellipse_mask()
+    grey = np.where(mask, 180.0, 60.0) + rng.normal(0, 10, mask.shape)
+    path = tmp_path / "grey.png"
+    Image.fromarray(np.clip(grey, 0, 255).astype(np.uint8)).save(path)
+    _check_ellipse(read_shape(path, threshold=120), mask)
+    with pytest.raises(ValueError, match=_err(path) + "a grey-level image .*threshold="):
+        read_shape(path)
+
+    tif = tmp_path / "grey16.tif"  # 16-bit TIFF, threshold in its own units
+    Image.fromarray((np.where(mask, 40000, 1000)).astype(np.uint16)).save(tif)
+    _check_ellipse(read_shape(tif, threshold=20000), mask)
+
+    jpg = tmp_path / "rgb.jpg"  # lossy colour: not a clean mask, so a threshold is needed
+    Image.fromarray(np.stack([mask * 200 + 20] * 3, axis=-1).astype(np.uint8)).save(jpg)
+    _check_ellipse(read_shape(jpg, threshold=110), mask)
+
+
+def test_image_with_varying_alpha_uses_it(tmp_path):
+    from PIL import Image
+
+    mask = _ellipse_mask()
+    rgba = np.zeros((*mask.shape, 4), dtype=np.uint8)
+    rgba[..., 3] = mask * 255  # black everywhere, opaque on the object
+    Image.fromarray(rgba).save(tmp_path / "alpha.png")
+    _check_ellipse(read_shape(tmp_path / "alpha.png"), mask)
+
+
+def test_image_errors(tmp_path):
+    from PIL import Image
+
+    blank = tmp_path / "blank.png"
+    Image.fromarray(np.zeros((20, 30), dtype=np.uint8)).save(blank)
+    with pytest.raises(ValueError, match=_err(blank) + "no object in the image"):
+        read_shape(blank)
+    grey = tmp_path / "grey.png"
+    Image.fromarray(np.arange(600, dtype=np.uint8).reshape(20, 30)).save(grey)
+    with pytest.raises(ValueError, match=_err(grey) + "no object .* above the threshold"):
+        read_shape(grey, threshold=-1)
+    with pytest.raises(ValueError, match=_err(grey) + "no object .* at or below"):
+        read_shape(grey, threshold=255)
+
+    broken = tmp_path / "broken.png"
+    broken.write_bytes(b"\x89PNG\r\n\x1a\n this is not an image")
+    with pytest.raises(ValueError, match=_err(broken) + "cannot read the image"):
+        read_shape(broken)
+
+
+# -- meshes ------------------------------------------------------------------------------
+
+
+def _icosphere():
+    """A once-subdivided icosahedron on the unit sphere: 42 points, 80 triangles."""
+    g = (1 + 5**0.5) / 2
+    verts = [(-1, g, 0), (1, g, 0), (-1, -g, 0), (1, -g, 0), (0, -1, g), (0, 1, g),
+             (0, -1, -g), (0, 1, -g), (g, 0, -1), (g, 0, 1), (-g, 0, -1), (-g, 0, 1)]
+    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9),
+             (5, 11, 4), (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2),
+             (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10),
+             (8, 6, 7), (9, 8, 1)]
+    verts = [np.array(v, dtype=float) / np.linalg.norm(v) for v in verts]
+    midpoint = {}
+
+    def mid(i, j):
+        key = (min(i, j), max(i, j))
+        if key not in midpoint:
+            v = verts[i] + verts[j]
+            verts.append(v / np.linalg.norm(v))
+            midpoint[key] = len(verts) - 1
+        return midpoint[key]
+
+    out = []
+    for a, b, c in faces:
+        ab, bc, ca = mid(a, b), mid(b, c), mid(c, a)
+        out += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
+    return np.array(verts), np.array(out)
+
+
+def _same_surface(shape, points, faces, atol):
+    """Points equal up to order (and float32 storage); the same set of triangles."""
+    dist = np.linalg.norm(shape.points[:, None] - points[None], axis=2)
+    order = dist.argmin(axis=1)
+    assert_allclose(shape.points, points[order], atol=atol)
+    assert len(set(order)) == len(points)
+    got = {tuple(sorted(t)) for t in order[shape.faces].tolist()}
+    assert got == {tuple(sorted(t)) for t in faces.tolist()}
+    assert len(shape.faces) == len(faces)
+
+
+@pytest.mark.parametrize("ext", ["ply", "obj", "stl", "vtk", "vtu", "off"])
+def test_mesh_round_trip(tmp_path, ext):
+    import meshio
+
+    points, faces = _icosphere()
+    path = tmp_path / f"sphere.{ext}"
+    extra = np.array([[5.0, 5.0, 5.0]])  # an unreferenced point, dropped on reading
+    meshio.write_points_cells(path, np.vstack([points, extra]), [("triangle", faces)])
+    shape = read_shape(path)
+    assert shape.dim == 3 and not shape.ordered
+    _same_surface(shape, points, faces, atol=1e-6)  # STL stores float32
+
+
+def test_mesh_quads_and_point_cloud(tmp_path):
+    import meshio
+
+    cube = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], float)
+    quads = np.array([[0, 1, 3, 2], [4, 5, 7, 6], [0, 1, 5, 4], [2, 3, 7, 6], [0, 2, 6, 4],
+                      [1, 3, 7, 5]])
+    meshio.write_points_cells(tmp_path / "cube.vtk", cube, [("quad", quads)])
+    shape = read_shape(tmp_path / "cube.vtk")
+    assert shape.m == 8 and len(shape.faces) == 12  # each quad split in two
+
+    meshio.write_points_cells(tmp_path / "cloud.vtk", cube, [("vertex", np.arange(8)[:, None])])
+    cloud = read_shape(tmp_path / "cloud.vtk")
+    assert cloud.faces is None and cloud.m == 8 and not cloud.ordered
+    with pytest.raises(ValueError, match="nodes= resamples 2D contours"):
+        read_shape(tmp_path / "cloud.vtk", nodes=5)
+
+
+def test_mesh_unreadable(tmp_path):
+    path = tmp_path / "junk.ply"
+    path.write_text("this is not a ply file\n")
+    with pytest.raises(ValueError, match=_err(path) + "cannot read the mesh"):
+        read_shape(path)
+
+
+# -- bad inputs --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name, content, message", [
+    ("empty.csv", "", "the file is empty"),
+    ("blank.csv", "\n  \n# just a comment\n", "the file has no data"),
+    ("header.csv", "x,y\n", "a header line but no data"),
+    ("text.csv", "x,y\n0,0\n1,0\n1,abc\n0,1\n", "line 4: 'abc' in column 2 is not a number"),
+    ("nan.csv", "0,0\n1,0\nnan,1\n0,1\n", "line 3: non-finite coordinates"),
+    ("inf.tsv", "0\t0\n1\tinf\n0\t1\n", "line 2: non-finite coordinates"),
+    ("one.csv", "x,y\n1,2\n", "only 1 node; a shape needs at least 3"),
+    ("two.txt", "1 2\n3 4\n", "only 2 nodes"),
+    ("wide.csv", "1,2,3,4\n5,6,7,8\n9,1,2,3\n", "line 1 has 4 columns, expected 2 or 3"),
+    ("narrow.csv", "1\n2\n3\n", "line 1 has 1 column, expected 2 or 3"),
+    ("ragged.csv", "# c\n1,2\n3,4\n5,6,7\n", "line 4 has 3 columns, expected 2 like line 2"),
+    ("wideheader.csv", "a,b,c,d\n1,2,3,4\n", "line 1 .header. has 4 columns"),
+    ("repeat.csv", "0,0\n1,0\n1,0\n0,1\n", "repeated nodes"),
+    ("point.csv", "1,1\n1,1\n1,1\n1,1\n", "lie .nearly. at one point"),
+    ("binary.csv", b"\xff\xfe\x00\x01", "not a text file"),
+    ("bad.json", "[[0, 0], [1, 0]", "not valid JSON"),
+    ("keys.json", '{"nodes": [[0, 0]]}', "no \"points\""),
+    ("str.json", '[[0, 0], [1, "a"], [0, 1]]', "node 1: 'a' is not a number"),
+    ("ragged.json", "[[0, 0], [1, 0, 2], [0, 1]]", "node 1 has 3 coordinates, expected 2"),
+    ("nan.json", "[[0, 0], [1, 0], [NaN, 1]]", "node 2 has non-finite coordinates"),
+    ("one.json", "[[0, 0]]", "only 1 node"),
+    ("wide.json", "[[0, 0, 0, 0], [1, 0, 0, 0], [0, 1, 0, 0]]", "got shape .3, 4."),
+    ("shape.xyz", "0 0\n1 0\n0 1\n", "unknown file extension '.xyz'; supported: .csv, .tsv"),
+])
+def test_bad_files(tmp_path, name, content, message):
+    path = tmp_path / name
+    if isinstance(content, bytes):
+        path.write_bytes(content)
+    else:
+        path.write_text(content)
+    with pytest.raises(ValueError, match=_err(path) + ".*" + message):
+        read_shape(path)
+
+
+def test_bad_arrays(tmp_path):
+    cases = {
+        "one.npy": (np.array([[1.0, 2.0]]), "only 1 node"),
+        "flat.npy": (np.arange(6.0), r"expected an \(m, 2\) or \(m, 3\) array"),
+        "nan.npy": (np.array([[0, 0], [1, np.inf], [0, 1.0]]), "node 1 has non-finite"),
+        "text.npy": (np.array([["a", "b"]] * 3), "the array must be numeric"),
+    }
+    for name, (array, message) in cases.items():
+        np.save(tmp_path / name, array)
+        with pytest.raises(ValueError, match=_err(tmp_path / name) + message):
+            read_shape(tmp_path / name)
+    np.savez(tmp_path / "many.npz", a=SQUARE, b=SQUARE)
+    with pytest.raises(ValueError, match="no array named 'points' among"):
+        read_shape(tmp_path / "many.npz")
+    (tmp_path / "junk.npy").write_text("not numpy")
+    with pytest.raises(ValueError, match=_err(tmp_path / "junk.npy") + "cannot read it"):
+        read_shape(tmp_path / "junk.npy")
+
+
+def test_missing_file_directory_and_options(tmp_path):
+    missing = tmp_path / "nope.csv"
+    with pytest.raises(ValueError, match=_err(missing) + "no such file"):
+        read_shape(missing)
+    with pytest.raises(ValueError, match="is a directory"):
+        read_shape(tmp_path)
+    path = _written(tmp_path / "s.csv", SQUARE)
+    with pytest.raises(ValueError, match="threshold= applies to images only"):
+        read_shape(path, threshold=3)
+    with pytest.raises(ValueError, match="nodes must be an integer >= 3, got 2"):
+        read_shape(path, nodes=2)
+    cloud = _written(tmp_path / "c.csv", CLOUD)
+    with pytest.raises(ValueError, match=_err(cloud) + "nodes= resamples 2D contours"):
+        read_shape(cloud, nodes=10)
+    assert ".png" in SUPPORTED_EXTENSIONS and ".ply" in SUPPORTED_EXTENSIONS
+
+
+def test_write_points_errors(tmp_path):
+    with pytest.raises(ValueError, match="cannot write '.xyz' files; supported: .csv"):
+        write_points(tmp_path / "a.xyz", SQUARE)
+    with pytest.raises(ValueError, match=r"points must have shape \(m, 2\) or \(m, 3\)"):
+        write_points(tmp_path / "a.csv", np.zeros((3, 4)))
+    assert not list(tmp_path.iterdir())
+
+
+# -- results and atomic output -------------------------------------------------------------
+
+
+def _fake_morph(rng, steps=4, m=6, k=5):
+    """Stands in for the pipeline's result object, with the fields save_result reads."""
+    source = Shape(rng.normal(size=(m, 2)))
+    target = Shape(rng.normal(size=(m + 2, 2)))
+    shapes = source.points + np.linspace(0, 1, steps + 1)[:, None, None] * rng.normal(
+        size=(1, m, 2))
+    energy = np.r_[0.0, rng.random(steps)]
+    return types.SimpleNamespace(
+        shapes=shapes, loads=rng.normal(size=shapes.shape), energy=energy,
+        node_energy=rng.random((steps + 1, m)), mean_distance=np.linspace(2, 0.1, steps + 1),
+        matching=types.SimpleNamespace(pairs=np.column_stack([np.arange(k), np.arange(k)])),
+        similarity=None, converged=True, stop_reason="mean distance below tolerance",
+        source=source, target=target, steps=steps)
+
+
+def test_save_result(tmp_path, rng):
+    morph = _fake_morph(rng)
+    params = {"material": "rubber", "dt": np.float64(0.01), "steps": np.int64(4),
+              "sigma": np.array([1.0, 2.0]), "source": tmp_path / "a.csv", "nothing": None}
+    save_result(morph, tmp_path / "out", params=params)
+    out = tmp_path / "out"
+    assert sorted(p.name for p in out.iterdir()) == ["final_shape.csv", "result.json",
+                                                    "shapes.npz"]
+    result = json.loads((out / "result.json").read_text())
+    assert result == {
+        "modalmorph_version": modalmorph.__version__,
+        "parameters": {"material": "rubber", "dt": 0.01, "steps": 4, "sigma": [1.0, 2.0],
+                       "source": str(tmp_path / "a.csv"), "nothing": None},
+        "converged": True, "stop_reason": "mean distance below tolerance", "steps": 4,
+        "matches": 5, "source_nodes": 6, "target_nodes": 8, "dim": 2,
+        "mean_distance": morph.mean_distance.tolist(), "energy": morph.energy.tolist(),
+    }
+    with np.load(out / "shapes.npz") as data:
+        assert sorted(data.files) == ["energy", "loads", "mean_distance", "node_energy",
+                                      "pairs", "shapes"]
+        for key in ("shapes", "loads", "node_energy", "energy", "mean_distance"):
+            assert_array_equal(data[key], getattr(morph, key))
+        assert_array_equal(data["pairs"], morph.matching.pairs)
+    assert_array_equal(read_shape(out / "final_shape.csv").points, morph.shapes[-1])
+
+
+def test_save_result_rejects_unwritable_params(tmp_path, rng):
+    with pytest.raises(ValueError, match="params cannot be written as JSON"):
+        save_result(_fake_morph(rng), tmp_path / "out", params={"f": object()})
+    assert not (tmp_path / "out").exists()
+
+
+def test_atomic_output_dir(tmp_path):
+    final = tmp_path / "results"
+    with atomic_output_dir(final) as tmp:
+        assert tmp.parent == tmp_path and tmp != final
+        (tmp / "a.txt").write_text("new")
+        (tmp / "sub").mkdir()
+        (tmp / "sub" / "b.txt").write_text("b")
+    assert (final / "a.txt").read_text() == "new"
+    assert (final / "sub" / "b.txt").read_text() == "b"
+
+    (final / "keep.txt").write_text("kept")
+    with atomic_output_dir(final) as tmp:
+        (tmp / "a.txt").write_text("newer")  # replaces the same-named file
+    assert (final / "a.txt").read_text() == "newer"
+    assert (final / "keep.txt").read_text() == "kept"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["results"]  # no temporary left
+
+
+def test_atomic_output_dir_leaves_nothing_on_error(tmp_path):
+    final = tmp_path / "results"
+    with pytest.raises(RuntimeError, match="boom"), atomic_output_dir(final) as tmp:
+        (tmp / "half.txt").write_text("half-written")
+        raise RuntimeError("boom")
+    assert not list(tmp_path.iterdir())
+
+    final.mkdir()
+    (final / "a.txt").write_text("old")
+    with pytest.raises(RuntimeError), atomic_output_dir(final) as tmp:
+        (tmp / "a.txt").write_text("new")
+        raise RuntimeError("boom")
+    assert (final / "a.txt").read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["results"]
+
+
+def test_atomic_write(tmp_path):
+    path = tmp_path / "sub" / "data.npy"
+    with atomic_write(path) as tmp:
+        assert tmp.name == "data.npy" and tmp.parent.parent == path.parent
+        np.save(tmp, SQUARE)
+    assert_array_equal(np.load(path), SQUARE)
+    with pytest.raises(RuntimeError), atomic_write(path) as tmp:
+        np.save(tmp, CLOUD)
+        raise RuntimeError("boom")
+    assert_array_equal(np.load(path), SQUARE)  # untouched
+    assert sorted(p.name for p in path.parent.iterdir()) == ["data.npy"]
