@@ -17,7 +17,7 @@ source, ``loads`` (T+1, m, d), ``energy`` (T+1,), ``node_energy`` (T+1, m),
 from __future__ import annotations
 
 import os
-import tempfile
+import secrets
 from pathlib import Path
 
 import numpy as np
@@ -136,7 +136,7 @@ def _finish(ax, points: np.ndarray):
     else:
         ax.update_datalim(points)
         ax.autoscale_view()
-        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_aspect("equal", adjustable="box")
         ax.set(xlabel="x", ylabel="y")
 
 
@@ -219,8 +219,8 @@ def plot_matches(source, target, pairs, *, ax=None):
     -------
     matplotlib.axes.Axes
     """
-    src, s_closed, s_ordered, s_faces = _describe(source, "source")
-    tgt, t_closed, t_ordered, t_faces = _describe(target, "target")
+    src, s_closed, s_ordered, _ = _describe(source, "source")
+    tgt, t_closed, t_ordered, _ = _describe(target, "target")
     if src.shape[1] != tgt.shape[1]:
         raise ValueError(f"source and target must have the same dimension, got "
                          f"{src.shape[1]} and {tgt.shape[1]}")
@@ -243,15 +243,14 @@ def plot_matches(source, target, pairs, *, ax=None):
     ax.add_collection(_line_collection(segs, ax, colors=MATCH_COLOR, linewidths=0.6,
                                        zorder=1))
     size = 14 if dim == 2 else 8
-    for pts, closed, ordered, faces, color, marker, who in (
-        (src, s_closed, s_ordered, s_faces, SOURCE_COLOR, "o", "source"),
-        (tgt, t_closed, t_ordered, t_faces, TARGET_COLOR, "s", "target"),
+    for pts, closed, ordered, color, marker, who in (
+        (src, s_closed, s_ordered, SOURCE_COLOR, "o", "source"),
+        (tgt, t_closed, t_ordered, TARGET_COLOR, "s", "target"),
     ):
-        edges = _edges(len(pts), closed, ordered, faces)
+        edges = _edges(len(pts), closed, ordered, None)  # contours only: meshes clutter
         if len(edges):
             ax.add_collection(_line_collection(pts[edges], ax, colors=color, linewidths=0.8,
-                                               alpha=0.6 if faces is None else 0.25,
-                                               zorder=2))
+                                               alpha=0.6, zorder=2))
         ax.scatter(*pts.T, s=size, c=color, marker=marker, linewidths=0, zorder=3,
                    label=f"{who} ({len(pts)} nodes)")
     handles, labels = ax.get_legend_handles_labels()
@@ -312,12 +311,19 @@ def plot_shapes(morph, *, color_by="energy", every: int = 1, ax=None):
     else:  # surfaces and clouds: each node's path, segment j-1 -> j coloured by step j
         segs = np.stack([shapes[drawn[:-1]], shapes[drawn[1:]]], axis=2).reshape(-1, 2, dim)
         vals = values[drawn[1:]].reshape(-1)
-    lines = _line_collection(segs, ax, cmap=cmap, norm=norm, linewidths=1.1, zorder=2,
-                             capstyle="round")
+    lines = _line_collection(segs, ax, cmap=cmap, norm=norm, zorder=2, capstyle="round",
+                             linewidths=1.2 if contour else 0.6)
     lines.set_array(vals)
     ax.add_collection(lines)
-    if not contour:  # the final shape's nodes, coloured by their value
-        ax.scatter(*shapes[-1].T, c=values[-1], cmap=cmap, norm=norm, s=10, zorder=3,
+    if faces is not None and len(faces):  # the final surface, each face by its nodes' mean
+        from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+        surf = Poly3DCollection(shapes[-1][faces], cmap=cmap, norm=norm, alpha=0.9,
+                                edgecolors="0.3", linewidths=0.15, zorder=3)
+        surf.set_array(values[-1][faces].mean(axis=1))
+        ax.add_collection3d(surf)
+    elif not contour:  # the final cloud's nodes, coloured by their value
+        ax.scatter(*shapes[-1].T, c=values[-1], cmap=cmap, norm=norm, s=14, zorder=3,
                    linewidths=0)
 
     src_label = "source" if getattr(morph, "similarity", None) is None else "source (aligned)"
@@ -327,7 +333,8 @@ def plot_shapes(morph, *, color_by="energy", every: int = 1, ax=None):
     if len(t_edges) and t_faces is None:
         ax.add_collection(_line_collection(tgt[t_edges], ax, colors=TARGET_COLOR,
                                            linewidths=1.0, linestyles="--", zorder=4))
-    ax.scatter(*tgt.T, s=size + 3, c=TARGET_COLOR, marker="s", linewidths=0, zorder=5)
+    ax.scatter(*tgt.T, s=size + 3, c=TARGET_COLOR, marker="s", linewidths=0, zorder=5,
+               alpha=1.0 if dim == 2 else 0.6)
 
     mid = cmap(0.5)
     t_style = {"ls": "--"} if len(t_edges) and t_faces is None else {"ls": "none"}
@@ -337,7 +344,8 @@ def plot_shapes(morph, *, color_by="energy", every: int = 1, ax=None):
         Line2D([], [], color=mid, lw=1.0, marker="o", ms=3),
         Line2D([], [], color=TARGET_COLOR, marker="s", ms=4, **t_style),
     ]
-    inner = ("intermediate shapes" if contour else "node paths, final nodes")
+    inner = ("intermediate shapes" if contour else
+             "node paths, final surface" if faces is not None else "node paths, final nodes")
     labels = [f"{src_label} (step 0)", f"{inner} (steps 1-{n_steps - 1})", "target"]
     ax.legend(handles, labels, loc="best", fontsize="small")
     _colorbar(ax, lines, color_by, n_steps=n_steps)
@@ -382,7 +390,8 @@ def plot_energy(morph, *, ax=None):
     twin.set_ylim(bottom=0.0)
     status = "converged" if getattr(morph, "converged", False) else "not converged"
     reason = getattr(morph, "stop_reason", "")
-    ax.legend([e_line, d_line], [e_line.get_label(), d_line.get_label()], loc="best",
+    ax.legend([e_line, d_line], [e_line.get_label(), d_line.get_label()],
+              loc="lower center", bbox_to_anchor=(0.5, 1.01), ncols=2, frameon=False,
               fontsize="small", title=f"{status}: {reason}" if reason else status,
               title_fontsize="small")
     return ax
@@ -444,63 +453,82 @@ def animate(morph, path, *, fps: int = 10, color_by="energy", dpi: int = 100) ->
     shapes = np.asarray(morph.shapes, dtype=np.float64)
     n_steps, m, dim = shapes.shape
     _, closed, ordered, faces = _describe(morph.source, "morph.source")
-    tgt, t_closed, t_ordered, t_faces = _describe(morph.target, "morph.target")
-    edges = _edges(m, closed, ordered, faces)
-    t_edges = _edges(len(tgt), t_closed, t_ordered, t_faces)
+    tgt, t_closed, t_ordered, _ = _describe(morph.target, "morph.target")
+    faces = faces if faces is not None and len(faces) else None
+    if color_by is None:
+        values, cmap, norm = np.zeros((n_steps, m)), None, None
+    else:
+        values = _node_values(morph, color_by)
+        cmap, norm = _colormap(color_by, values)
+
+    from matplotlib.lines import Line2D
 
     fig = Figure(figsize=(6.4, 5.2), dpi=dpi, layout="constrained")
     ax = _axes_for(fig, dim)
-    for pts, e, color, label in ((shapes[0], edges, SOURCE_COLOR, "source"),
-                                 (tgt, t_edges, TARGET_COLOR, "target")):
+    handles = []
+    for pts, (c, o), color, marker, label in (
+        (shapes[0], (closed, ordered), SOURCE_COLOR, "o", "source"),
+        (tgt, (t_closed, t_ordered), TARGET_COLOR, "s", "target"),
+    ):  # the fixed background, faint: contours as lines, surfaces and clouds as nodes
+        e = _edges(len(pts), c, o, None)
         if len(e):
-            ax.add_collection(_line_collection(pts[e], ax, colors=color, linewidths=0.8,
-                                               alpha=0.25, zorder=1))
-        ax.scatter(*pts.T, s=6, c=color, alpha=0.35, linewidths=0, zorder=1, label=label)
+            ax.add_collection(_line_collection(pts[e], ax, colors=color, linewidths=0.9,
+                                               alpha=0.35, zorder=1))
+        ax.scatter(*pts.T, s=5, c=color, marker=marker, alpha=0.35, linewidths=0, zorder=1)
+        handles.append(Line2D([], [], color=color, alpha=0.5, marker=marker, ms=3,
+                              ls="-" if len(e) else "none", label=label))
     _finish(ax, np.vstack([shapes.reshape(-1, dim), tgt]))
     ax.set_autoscale_on(False)
     if color_by is not None:
-        values = _node_values(morph, color_by)
-        cmap, norm = _colormap(color_by, values)
-    else:
-        values = np.zeros((n_steps, m))
-        cmap, norm = None, None
-    from matplotlib.cm import ScalarMappable
+        from matplotlib.cm import ScalarMappable
 
-    if color_by is not None:
         _colorbar(ax, ScalarMappable(norm=norm, cmap=cmap), color_by)
-    ax.legend(loc="upper right", fontsize="small")
+    ax.legend(handles=handles, loc="upper right", fontsize="small")
+    edges = _edges(m, closed, ordered, None)
 
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=suffix, dir=path.parent)
-    os.close(fd)
+    # a unique name beside the target, same suffix (ffmpeg picks its format from it)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}-{secrets.token_hex(4)}.tmp{suffix}")
     try:
         with writer.saving(fig, tmp, dpi=dpi):
             artists = []
             for j in range(n_steps):
-                for a in artists:
-                    a.remove()
-                artists = _draw_frame(ax, shapes[j], edges, values[j], cmap, norm)
+                for artist in artists:
+                    artist.remove()
+                artists = _draw_frame(ax, shapes[j], edges, faces, values[j], cmap, norm)
                 ax.set_title(f"step {j} / {n_steps - 1}", fontsize="medium")
                 writer.grab_frame()
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
     return path
 
 
-def _draw_frame(ax, points, edges, values, cmap, norm):
+def _draw_frame(ax, points, edges, faces, values, cmap, norm):
     """The artists of one animation frame: the shape at one step, coloured per node."""
+    one = "#1f4e99"  # the shape's colour when not coloured by a quantity
+    if faces is not None:
+        from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+        kw = {"facecolors": one} if cmap is None else {"cmap": cmap, "norm": norm}
+        surf = Poly3DCollection(points[faces], edgecolors="0.3", linewidths=0.15,
+                                alpha=0.9, zorder=3, **kw)
+        if cmap is not None:
+            surf.set_array(values[faces].mean(axis=1))
+        ax.add_collection3d(surf)
+        return [surf]
     artists = []
-    kw = {"colors": "#1f4e99"} if cmap is None else {"cmap": cmap, "norm": norm}
     if len(edges):
+        kw = {"colors": one} if cmap is None else {"cmap": cmap, "norm": norm}
         segs, vals = _half_segments(points, edges, values)
         lines = _line_collection(segs, ax, linewidths=1.6, zorder=3, capstyle="round", **kw)
         if cmap is not None:
             lines.set_array(vals)
         ax.add_collection(lines)
         artists.append(lines)
-    color = {"c": "#1f4e99"} if cmap is None else {"c": values, "cmap": cmap, "norm": norm}
-    artists.append(ax.scatter(*points.T, s=8, linewidths=0, zorder=4, **color))
+    kw = {"c": one} if cmap is None else {"c": values, "cmap": cmap, "norm": norm}
+    artists.append(ax.scatter(*points.T, s=8 if len(edges) else 14, linewidths=0, zorder=4,
+                              **kw))
     return artists
 
 
