@@ -35,3 +35,22 @@ def sphere_points(n, rng, *, radii=(1.0, 1.0, 1.0)):
     theta = np.pi * (1 + 5**0.5) * i
     p = np.c_[np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)]
     return p * np.asarray(radii) + 0.01 * rng.standard_normal((n, 3))
+
+
+def self_intersections(points, *, closed=True):
+    """Number of pairs of non-adjacent polyline segments that properly cross."""
+    p = np.asarray(points)
+    q = np.roll(p, -1, axis=0) if closed else p[1:]
+    p = p if closed else p[:-1]
+    n = len(p)
+
+    def orient(a, b, c):
+        return np.sign((b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1])
+                       - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
+
+    A, B = p[:, None], q[:, None]
+    C, D = p[None, :], q[None, :]
+    cross = (orient(A, B, C) * orient(A, B, D) < 0) & (orient(C, D, A) * orient(C, D, B) < 0)
+    i, j = np.triu_indices(n, k=2)
+    keep = ~(closed & (i == 0) & (j == n - 1))  # first and last segments share a node
+    return int(cross[i[keep], j[keep]].sum())

@@ -1,0 +1,167 @@
+"""Loads (19)-(21) and Newmark integration of the modal equations (11)-(16)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import linalg
+from scipy.spatial import cKDTree
+
+__all__ = ["Newmark", "LoadTargets", "check_newmark"]
+
+
+def check_newmark(alpha: float, delta: float) -> None:
+    """Refuse Newmark parameters outside the unconditionally stable range (14).
+
+    Newmark's method is unconditionally stable for ``2 alpha >= delta >= 0.5``.
+    """
+    if not (delta >= 0.5 and 2 * alpha >= delta):
+        raise ValueError(
+            f"Newmark alpha={alpha:g}, delta={delta:g} is not unconditionally stable: "
+            f"need 2*alpha >= delta >= 0.5 (e.g. alpha=0.25, delta=0.5, or "
+            f"alpha=(delta+0.5)**2/4 for delta > 0.5, (16))")
+
+
+class LoadTargets:
+    """Where each source node is pulled to: its partner, or the neighbourhood rule (20).
+
+    Matched node ``i``: its partner on the target (19). Unmatched node ``B`` of an ordered
+    contour between matched neighbours ``A`` and ``C`` (along the contour): the weighted
+    mean of the target nodes ``B'`` between their partners ``A'`` and ``C'`` (the shorter
+    way round a closed target; ``A'`` and ``C'`` themselves when none lies between), with
+    weights ``D_tot - D_B'`` normalised to sum to 1, ``D_B' = |X_B - X_2,B'|`` (20). At the
+    ends of an open contour, a node with one matched neighbour ``A`` moves with ``A``
+    (target ``X_1,B + A' - A``). For unordered 3D point sets and surfaces the neighbours
+    are the ``neighbours`` nearest matched nodes (Euclidean, in the source), and ``B`` is
+    pulled to ``X_1,B`` plus the (20)-weighted mean of their displacements ``A' - A``.
+
+    Parameters
+    ----------
+    source, target : ndarray, shape (m, d) and (n, d)
+        Nodes in one common frame.
+    pairs : ndarray of int, shape (K, 2)
+        Matched (source, target) indices.
+    ordered, closed : bool
+        Topology of the source (and target) contour.
+    neighbours : int
+        Number of matched neighbours for unordered objects.
+    """
+
+    def __init__(self, source, target, pairs, *, ordered: bool, closed: bool,
+                 target_closed: bool = True, neighbours: int = 6):
+        m = len(source)
+        self.source = source
+        self.target = target
+        self.matched = np.zeros(m, dtype=bool)
+        self.matched[pairs[:, 0]] = True
+        self.partner = np.full(m, -1)
+        self.partner[pairs[:, 0]] = pairs[:, 1]
+        un = np.flatnonzero(~self.matched)
+        # For each unmatched node: candidate target indices (ragged -> padded) or carriers.
+        self._mode = "ordered" if ordered else "cloud"
+        if un.size == 0:
+            self._groups = []
+            return
+        if ordered:
+            self._groups = self._contour_candidates(un, closed, target_closed, len(target))
+        else:
+            k = min(neighbours, int(self.matched.sum()))
+            idx_matched = np.flatnonzero(self.matched)
+            _, nb = cKDTree(source[idx_matched]).query(source[un], k=k)
+            nb = idx_matched[np.asarray(nb).reshape(len(un), k)]
+            self._groups = [("carry", un, nb)]
+
+    def _contour_candidates(self, un, closed, target_closed, n):
+        midx = np.flatnonzero(self.matched)
+        pos = np.searchsorted(midx, un)  # next matched index after each unmatched node
+        groups = []
+        by_key: dict[tuple[int, int], list[int]] = {}
+        carry_nodes, carry_from = [], []
+        for b, p in zip(un, pos, strict=True):
+            if closed:
+                a, c = midx[p - 1], midx[p % len(midx)]  # cyclic neighbours
+            else:
+                a = midx[p - 1] if p > 0 else -1
+                c = midx[p] if p < len(midx) else -1
+                if a < 0 or c < 0:  # an end of an open contour: move with the neighbour
+                    carry_nodes.append(b)
+                    carry_from.append(c if a < 0 else a)
+                    continue
+            by_key.setdefault((a, c), []).append(b)
+        for (a, c), nodes in by_key.items():
+            cand = _between(self.partner[a], self.partner[c], n, target_closed)
+            groups.append(("mean", np.asarray(nodes), cand))
+        if carry_nodes:
+            groups.append(("carry", np.asarray(carry_nodes), np.asarray(carry_from)[:, None]))
+        return groups
+
+    def targets(self, current: np.ndarray) -> np.ndarray:
+        """Target position of every node for the current shape ``current`` (m, d)."""
+        out = current.copy()
+        out[self.matched] = self.target[self.partner[self.matched]]  # (19)
+        for kind, nodes, cand in self._groups:
+            if kind == "mean":  # (20), normalised weights
+                pts = self.target[cand]  # (c, d)
+                D = np.linalg.norm(current[nodes, None, :] - pts[None], axis=2)  # (b, c)
+                out[nodes] = _weighted_mean(D, pts[None])
+            else:  # where the matched neighbours' displacements would take the node
+                disp = self.target[self.partner[cand]] - self.source[cand]  # (b, k, d)
+                D = np.linalg.norm(self.source[nodes, None, :] - self.source[cand], axis=2)
+                out[nodes] = self.source[nodes] + _weighted_mean(D, disp)
+        return out
+
+
+def _between(a2: int, c2: int, n: int, closed: bool) -> np.ndarray:
+    """Target indices strictly between a2 and c2 (the shorter way on a closed contour);
+    the two ends themselves when none lies between."""
+    if closed:
+        fwd = (c2 - a2) % n
+        bwd = (a2 - c2) % n
+        idx = (a2 + np.arange(1, fwd)) % n if fwd <= bwd else (c2 + np.arange(1, bwd)) % n
+    else:
+        lo, hi = sorted((a2, c2))
+        idx = np.arange(lo + 1, hi)
+    return idx if idx.size else np.array(sorted({a2, c2}))
+
+
+def _weighted_mean(D: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """(20) with weights ``D_tot - D`` normalised to 1 (uniform when they vanish)."""
+    w = D.sum(axis=1, keepdims=True) - D
+    total = w.sum(axis=1, keepdims=True)
+    w = np.where(total > 0, w / np.where(total > 0, total, 1), 1.0 / D.shape[1])
+    return np.einsum("bc,bcd->bd", w, np.broadcast_to(values, (*D.shape, values.shape[-1])))
+
+
+@dataclass(frozen=True)
+class Newmark:
+    """Newmark's method (14)-(15) for ``x'' + C x' + K x = f`` in modal coordinates.
+
+    ``C`` and ``K`` are (n, n) matrices (diagonal for uncoupled modes). ``alpha`` and
+    ``delta`` are Newmark's parameters (beta and gamma in most texts).
+    """
+
+    K: np.ndarray
+    C: np.ndarray
+    dt: float
+    alpha: float = 0.25
+    delta: float = 0.5
+
+    def __post_init__(self):
+        a0 = 1.0 / (self.alpha * self.dt**2)
+        a1 = self.delta / (self.alpha * self.dt)
+        n = self.K.shape[0]
+        K_eff = self.K + a0 * np.eye(n) + a1 * self.C  # left side of (15)
+        object.__setattr__(self, "_factor", linalg.cho_factor(K_eff, check_finite=False))
+
+    def step(self, x, v, a, f):
+        """One step: state (x, v, a) at t and load f at t + dt -> state at t + dt."""
+        al, de, dt = self.alpha, self.delta, self.dt
+        a0, a1 = 1 / (al * dt**2), de / (al * dt)
+        a2, a3 = 1 / (al * dt), 1 / (2 * al) - 1
+        a4, a5 = de / al - 1, dt / 2 * (de / al - 2)
+        rhs = f + (a0 * x + a2 * v + a3 * a) + self.C @ (a1 * x + a4 * v + a5 * a)  # (15)
+        x1 = linalg.cho_solve(self._factor, rhs, check_finite=False)
+        a_new = a0 * (x1 - x) - a2 * v - a3 * a
+        v1 = v + dt * ((1 - de) * a + de * a_new)  # (14)
+        return x1, v1, a_new

@@ -1,0 +1,351 @@
+"""``morph()``: the whole method, end to end, returning one result object."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .dynamics import LoadTargets, Newmark, check_newmark
+from .element import DEFAULT_SIGMA, FEModel
+from .energy import node_energy, strain_energy
+from .material import POLYETHYLENE, Material
+from .modes import rayleigh
+from .shape import Shape, as_shape
+
+__all__ = ["Morph", "MorphDivergedError", "morph"]
+
+log = logging.getLogger(__name__)
+
+
+class MorphDivergedError(ArithmeticError):
+    """The time integration diverged; ``.steps`` says when, the message what to change."""
+
+    def __init__(self, message: str, steps: int):
+        super().__init__(message)
+        self.steps = steps
+
+
+@dataclass(frozen=True, eq=False)
+class Morph:
+    """The intermediate shapes between two objects and their strain energy.
+
+    Attributes
+    ----------
+    shapes : ndarray, shape (T+1, m, d)
+        The deforming source at every step, in the user's (target's) coordinates. Step 0
+        is the source (after removing the rigid part, when ``remove_rigid``).
+    loads : ndarray, shape (T+1, m, d)
+        Load on every node, ``k (X_2 - X_j)`` (19)-(20), in the user's length units times
+        the dimensionless ``k``.
+    energy : ndarray, shape (T+1,)
+        Global strain energy ``U^T K U`` (22), in units of ``k_ref L^2`` (``k_ref`` the
+        stiffness of one node, ``L`` the source's RMS radius): independent of the units of
+        the input and of the material's E.
+    node_energy : ndarray, shape (T+1, m)
+        Strain energy per node (25), same units; sums to ``energy``; may be negative.
+    mean_distance : ndarray, shape (T+1,)
+        Mean distance of the matched nodes to their partners, in the user's units.
+    matching : Matching
+        The correspondences used.
+    similarity : Similarity or None
+        The similarity removed before morphing (``remove_rigid``), else None.
+    converged : bool
+        Whether the mean distance reached the tolerance.
+    stop_reason : str
+        ``"tolerance"``, ``"equilibrium"`` or ``"max_steps"``, with the final distance.
+    source, target : Shape
+        The objects as given (the source before any rigid alignment).
+    params : dict
+        Every option used, for reports.
+    """
+
+    shapes: np.ndarray
+    loads: np.ndarray
+    energy: np.ndarray
+    node_energy: np.ndarray
+    mean_distance: np.ndarray
+    matching: object
+    similarity: object
+    converged: bool
+    stop_reason: str
+    source: Shape
+    target: Shape
+    params: dict = field(default_factory=dict)
+
+    @property
+    def steps(self) -> int:
+        """Number of time steps taken, T."""
+        return self.shapes.shape[0] - 1
+
+
+def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float = 100.0,
+          dt: float = 0.1, alpha: float = 0.25, delta: float = 0.5,
+          damping: tuple[float, float] = (2.0, 2.0), c_x: float = 0.0, c_v: float = 0.0,
+          material: Material = POLYETHYLENE, sigma: float = DEFAULT_SIGMA,
+          modes: int | float | None = None, scheme: str = "implicit", tol: float = 0.005,
+          tol_distance: float | None = None, max_steps: int = 100,
+          equilibrium_tol: float = 1e-7, neighbours: int = 6) -> Morph:
+    """Estimate the intermediate shapes that take ``source`` into ``target``.
+
+    The source is modelled with Sclaroff's Gaussian element, matched nodes are pulled to
+    their partners by springs of stiffness ``k`` (19), unmatched nodes by the neighbourhood
+    rule (20), and Lagrange's dynamic equilibrium ``M U'' + C U' + K U = R`` (9) is
+    integrated in time by mode superposition (11)-(13) and Newmark's method (14)-(15).
+
+    Parameters
+    ----------
+    source, target : Shape or array_like, shape (m, d) and (n, d)
+        The objects at times t and t+1, both 2D or both 3D.
+    matching : Matching or array_like of int (K, 2), optional
+        Correspondences (source index, target index). Computed with
+        :func:`modalmorph.match` when not given.
+    remove_rigid : bool, optional
+        Align the source onto the target first with Horn's similarity (rotation,
+        translation, scale) from the matched pairs; the morph then holds only the
+        non-rigid part and usually needs far fewer steps.
+    k : float, optional
+        Stiffness of the springs that pull nodes to their targets (19), in units of the
+        elastic stiffness of one node of the model. Larger ``k`` pulls harder: fewer steps
+        and a closer final fit; with ``scheme="explicit"`` too large a ``k`` diverges.
+    dt : float, optional
+        Time step, in units of ``1/omega_ref`` (``omega_ref`` the natural frequency of one
+        node on its own elastic stiffness). Larger steps move faster per step.
+    alpha, delta : float, optional
+        Newmark's parameters (14). ``delta=0.5`` has no numerical damping; ``delta > 0.5``
+        damps (first-order accurate), best with ``alpha=(delta+0.5)**2/4`` (16). Must
+        satisfy ``2 alpha >= delta >= 0.5``.
+    damping : (float, float), optional
+        Damping ratios (fractions of critical) at the lowest and highest frequencies of the
+        loaded model (elastic stiffness plus springs), giving Rayleigh's
+        ``C = a M + b K`` (5). The paper used 0.005-0.03, which leaves the shape
+        oscillating about the target for many steps; the default (2, 2), twice critical,
+        makes the shape approach the target without overshoot (measured on the hands).
+    c_x, c_v : float, optional
+        Initial displacement as a fraction of the load (17), (21) and initial velocity
+        ``c_v`` times it (18). Larger values start faster.
+    material : Material, optional
+        The material filling the source (default polyethylene, the paper's).
+    sigma : float, optional
+        Gaussian width in units of the mean node spacing (see :class:`FEModel`).
+    modes : int, float or None, optional
+        Modes used in the superposition: all (``None``), a count, or a fraction in (0, 1]
+        of all modes (the paper compares all with 2/3). Fewer modes: cheaper steps, a less
+        exact final shape.
+    scheme : {"implicit", "explicit"}, optional
+        Where the loads are evaluated. ``"implicit"``: at the new shape (the spring enters
+        the effective stiffness; unconditionally stable). ``"explicit"``: at the previous
+        shape, as in the paper (stable only for small ``k``).
+    tol : float, optional
+        Stop when the mean distance of matched nodes to their partners falls below this
+        fraction of the target's RMS radius.
+    tol_distance : float, optional
+        The same tolerance in the user's units; overrides ``tol``.
+    max_steps : int, optional
+        Maximum number of time steps.
+    equilibrium_tol : float, optional
+        Stop when no node moves by more than this fraction of the source's size in a step.
+    neighbours : int, optional
+        For unordered 3D objects: how many matched neighbours pull an unmatched node.
+
+    Returns
+    -------
+    Morph
+
+    Raises
+    ------
+    ValueError
+        For invalid inputs or options, or when no node is matched.
+    MorphDivergedError
+        When the integration diverges (typically the explicit scheme with too large a k).
+    """
+    src = as_shape(source, "source")
+    tgt = as_shape(target, "target")
+    if src.dim != tgt.dim:
+        raise ValueError(f"source and target must have the same dimension, got "
+                         f"{src.dim}D and {tgt.dim}D")
+    _check_options(k=k, dt=dt, damping=damping, scheme=scheme, tol=tol,
+                   tol_distance=tol_distance, max_steps=max_steps, neighbours=neighbours)
+    check_newmark(alpha, delta)
+    if matching is None:
+        from .matching import match
+
+        matching = match(src, tgt)
+    pairs = _pairs(matching, src.m, tgt.m)
+
+    similarity = None
+    work = src
+    if remove_rigid:  # section 5.2: Horn's similarity from the matched pairs
+        from .align import align
+
+        similarity = align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]], scale=True)
+        work = src.with_points(similarity.apply(src.points))
+
+    model = FEModel(work, sigma=sigma, material=material)
+    n_modes = _mode_count(modes, model.dim * model.m)
+    md = model.modes(n_modes)
+    d, m = model.dim, model.m
+    Phi, w2 = md.shapes, md.eigenvalues
+    rho = material.rho
+    # M Phi = (I kron A) M_g psi: the "cheap product" of method.md §1
+    MPhi = model.solve_gram(rho * _kron_apply(model.gram[1], md.gaussian, d))
+
+    # Reference scales: the stiffness and mass of one node in the Gaussian basis.
+    lam, mu = model.lame
+    V = (np.pi * model.sigma**2) ** (d / 2)
+    k_ref = V / model.sigma**2 * ((lam + mu) / 2 + mu * d / 2)
+    m_ref = rho * V
+    w_ref = np.sqrt(k_ref / m_ref)
+    k_abs, dt_abs = k * k_ref, dt / w_ref
+
+    X1 = np.asarray(work.normalized)
+    Y = work.to_normalized(tgt.points)
+    loads_rule = LoadTargets(X1, Y, pairs, ordered=bool(work.ordered), closed=work.closed,
+                             target_closed=tgt.closed, neighbours=neighbours)
+
+    PtP = Phi.T @ Phi
+    K_mod = np.diag(w2) + (k_abs * PtP if scheme == "implicit" else 0.0)
+    w_lo, w_hi = _frequency_range(K_mod)
+    a_r, b_r = rayleigh(*damping, w_lo, w_hi)
+    C_mod = a_r * np.eye(len(w2)) + b_r * K_mod  # (5) on the loaded model
+    integrator = Newmark(K_mod, C_mod, dt_abs, alpha, delta)
+
+    def flat(P):  # (m, d) -> component-major (d*m,) (7)
+        return P.T.reshape(-1)
+
+    def nodes(u):  # (d*m,) -> (m, d)
+        return u.reshape(d, m).T
+
+    size = work.size
+    tol_n = (tol_distance / size) if tol_distance is not None else tol * tgt.size / size
+    shapes, loads, energy, e_node, dist = [], [], [], [], []
+
+    def record(x, current, targets):
+        U = Phi @ x
+        shapes.append(work.to_user(current))
+        loads.append(k * (targets - current) * size)  # (19)-(20), user length units x k
+        energy.append(strain_energy(x, w2) / k_ref)  # (22)
+        e_node.append(node_energy(U, MPhi @ (w2 * x), d) / k_ref)  # (25)
+        dist.append(_mean_distance(current, Y, pairs))
+
+    # t = 0: the source, and the initial state (17), (18), (21)
+    T0 = loads_rule.targets(X1)
+    U0 = c_x * flat(T0 - X1)  # (21): U0 = (c_x / k) R0
+    x = MPhi.T @ U0  # X0 = Phi^T M U0
+    v = c_v * x  # (18)
+    f_const = k_abs * (Phi.T @ flat(T0 - X1))
+    f = f_const - (0.0 if scheme == "implicit" else k_abs * (Phi.T @ U0))
+    a = f - C_mod @ v - K_mod @ x
+    record(np.zeros_like(x), X1, T0)
+    d0 = dist[0]
+    reason = "tolerance" if d0 <= tol_n else None
+    current = X1 + nodes(Phi @ x)
+    T = loads_rule.targets(current)  # weights of (20) from the current shape
+    step = 0
+    while reason is None:
+        step += 1
+        if scheme == "implicit":  # R = k (T - X1 - U_new): the U_new part is in K_mod
+            f = k_abs * (Phi.T @ flat(T - X1))
+        else:  # (19) evaluated at the previous shape
+            f = k_abs * (Phi.T @ flat(T - current))
+        x_new, v, a = integrator.step(x, v, a, f)
+        new = X1 + nodes(Phi @ x_new)
+        moved = np.abs(new - current).max()
+        x, current = x_new, new
+        if not np.all(np.isfinite(x)) or _mean_distance(current, Y, pairs) > 10 * max(d0, 1):
+            raise MorphDivergedError(
+                f"the morph diverged at step {step} ({scheme} loads, k={k:g}, dt={dt:g}): "
+                + ("the explicit load is only conditionally stable; use scheme='implicit' "
+                   "or a smaller k or dt" if scheme == "explicit"
+                   else "try a smaller dt or k, or more damping"), step)
+        T = loads_rule.targets(current)
+        record(x, current, T)
+        if dist[-1] <= tol_n:
+            reason = "tolerance"
+        elif moved <= equilibrium_tol:
+            reason = "equilibrium"
+        elif step == max_steps:
+            reason = "max_steps"
+
+    converged = reason == "tolerance"
+    final = dist[-1] * size
+    stop = (f"{reason}: mean distance {final:.4g} after {len(dist) - 1} steps "
+            f"(tolerance {tol_n * size:.4g})")
+    if not converged:
+        log.info("morph stopped without reaching the tolerance: %s", stop)
+    params = dict(remove_rigid=remove_rigid, k=k, dt=dt, alpha=alpha, delta=delta,
+                  damping=list(damping), c_x=c_x, c_v=c_v, material=material.name,
+                  E=material.E, nu=material.nu, rho=material.rho, sigma=sigma,
+                  modes=n_modes, scheme=scheme, tol=tol, tol_distance=tol_distance,
+                  max_steps=max_steps, equilibrium_tol=equilibrium_tol,
+                  neighbours=neighbours)
+    return Morph(shapes=np.array(shapes), loads=np.array(loads), energy=np.array(energy),
+                 node_energy=np.array(e_node), mean_distance=np.array(dist) * size,
+                 matching=matching, similarity=similarity, converged=converged,
+                 stop_reason=stop, source=src, target=tgt, params=params)
+
+
+def _kron_apply(B, X, d):
+    m = B.shape[0]
+    return np.einsum("ij,ajn->ain", B, X.reshape(d, m, -1)).reshape(X.shape)
+
+
+def _frequency_range(K_mod):
+    ev = np.linalg.eigvalsh(K_mod)
+    hi = np.sqrt(ev[-1])
+    lo = np.sqrt(max(ev[0], 0.0))
+    return min(lo, hi * (1 - 1e-9)), hi
+
+
+def _mean_distance(current, Y, pairs):
+    return float(np.linalg.norm(current[pairs[:, 0]] - Y[pairs[:, 1]], axis=1).mean())
+
+
+def _pairs(matching, m, n):
+    pairs = getattr(matching, "pairs", matching)
+    pairs = np.asarray(pairs)
+    if pairs.ndim != 2 or pairs.shape[1] != 2 or not np.issubdtype(pairs.dtype, np.integer):
+        raise ValueError(f"matching must be a Matching or an integer array of shape (K, 2), "
+                         f"got {pairs.dtype} {pairs.shape}")
+    if len(pairs) == 0:
+        raise ValueError("no node is matched: morph needs at least one matched pair")
+    if pairs[:, 0].min() < 0 or pairs[:, 0].max() >= m or pairs[:, 1].min() < 0 \
+            or pairs[:, 1].max() >= n:
+        raise ValueError(f"matching indices out of range for {m} source and {n} target nodes")
+    if len(np.unique(pairs[:, 0])) != len(pairs):
+        raise ValueError("matching pairs a source node more than once")
+    return pairs.astype(np.intp)
+
+
+def _mode_count(modes, total):
+    """``None``: all modes; an int: a count; a float: a fraction of all modes."""
+    if modes is None:
+        return total
+    if isinstance(modes, float | np.floating):
+        if not 0 < modes <= 1:
+            raise ValueError(f"modes as a fraction must be in (0, 1], got {modes}")
+        return max(1, int(round(modes * total)))
+    if not isinstance(modes, int | np.integer) or not 1 <= modes <= total:
+        raise ValueError(f"modes must be None, a count between 1 and {total} (d * m), "
+                         f"or a fraction in (0, 1], got {modes!r}")
+    return int(modes)
+
+
+def _check_options(*, k, dt, damping, scheme, tol, tol_distance, max_steps, neighbours):
+    if not np.isfinite(k) or k <= 0:
+        raise ValueError(f"k must be a positive number, got {k}")
+    if not np.isfinite(dt) or dt <= 0:
+        raise ValueError(f"dt must be a positive number, got {dt}")
+    if len(damping) != 2 or min(damping) < 0:
+        raise ValueError(f"damping must be two ratios >= 0, got {damping}")
+    if scheme not in ("implicit", "explicit"):
+        raise ValueError(f"scheme must be 'implicit' or 'explicit', got {scheme!r}")
+    if not tol > 0:
+        raise ValueError(f"tol must be > 0, got {tol}")
+    if tol_distance is not None and not tol_distance > 0:
+        raise ValueError(f"tol_distance must be > 0, got {tol_distance}")
+    if int(max_steps) != max_steps or max_steps < 1:
+        raise ValueError(f"max_steps must be a positive integer, got {max_steps}")
+    if int(neighbours) != neighbours or neighbours < 1:
+        raise ValueError(f"neighbours must be a positive integer, got {neighbours}")

@@ -1,0 +1,177 @@
+"""morph(): the paper's findings as trends, and the invariants of the method."""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from modalmorph.datasets import load_hand
+from modalmorph.pipeline import MorphDivergedError, morph
+
+from .conftest import self_intersections, sphere_points
+
+
+def _hands(i, j, n=100):
+    """Hands i and j sampled at the same n anatomical points: ground-truth pairs."""
+    idx = np.linspace(0, 1590, n, endpoint=False).astype(int)
+    return load_hand(i)[idx], load_hand(j)[idx], np.c_[np.arange(n), np.arange(n)]
+
+
+def _rms(points):
+    return np.sqrt(np.mean(np.sum((points - points.mean(axis=0)) ** 2, axis=1)))
+
+
+def _rotate(points, angle, scale=1.0, shift=(0.0, 0.0)):
+    c, s = np.cos(angle), np.sin(angle)
+    return scale * points @ np.array([[c, -s], [s, c]]).T + np.asarray(shift)
+
+
+@pytest.mark.parametrize("i, j, n", [(0, 3, 100), (1, 5, 100), (2, 7, 70), (4, 6, 250)])
+def test_defaults_converge_on_hands(i, j, n):
+    a, b, pairs = _hands(i, j, n)
+    r = morph(a, b, matching=pairs)
+    assert r.converged and r.steps <= 100
+    assert r.mean_distance[-1] <= 0.01 * _rms(b)  # within 1% of the target's size
+    assert np.isfinite(r.shapes).all() and np.isfinite(r.energy).all()
+    assert all(self_intersections(s) == 0 for s in r.shapes)  # source and target are simple
+    assert_allclose(r.shapes[0], a)  # step 0 is the source
+    assert r.shapes.shape == (r.steps + 1, n, 2) and r.loads.shape == r.shapes.shape
+    assert r.node_energy.shape == (r.steps + 1, n)
+
+
+def test_result_fields_consistent():
+    a, b, pairs = _hands(0, 3, 80)
+    r = morph(a, b, matching=pairs)
+    # (25) sums to (22); relative to the largest energy, round-off only
+    assert_allclose(r.node_energy.sum(axis=1), r.energy, atol=1e-9 * r.energy.max())
+    assert np.all(r.energy >= 0)  # global strain energy is never negative
+    assert r.energy[0] == 0
+    d = np.linalg.norm(r.shapes[:, pairs[:, 0]] - b[pairs[:, 1]], axis=2).mean(axis=1)
+    assert_allclose(r.mean_distance, d, rtol=1e-12)
+    assert r.params["k"] == 100.0 and r.stop_reason.startswith("tolerance")
+
+
+def test_identity_does_not_move():
+    a, _, pairs = _hands(0, 0, 60)
+    r = morph(a, a, matching=pairs)
+    assert r.converged and r.steps == 0
+    assert_allclose(r.energy, 0.0)
+    assert_allclose(r.shapes[-1], a)
+
+
+def test_larger_k_converges_in_fewer_steps():
+    a, b, pairs = _hands(1, 5, 100)
+    slow = morph(a, b, matching=pairs, k=10, tol=0.01)
+    fast = morph(a, b, matching=pairs, k=60, tol=0.01)
+    assert fast.converged and fast.steps < slow.steps
+
+
+def test_explicit_with_large_k_diverges():
+    a, b, pairs = _hands(0, 3, 100)
+    stable = morph(a, b, matching=pairs, scheme="explicit", k=1, max_steps=30, tol=0.02)
+    assert np.isfinite(stable.shapes).all()
+    with pytest.raises(MorphDivergedError, match="diverged at step .* explicit") as info:
+        morph(a, b, matching=pairs, scheme="explicit", k=30)
+    assert info.value.steps > 0
+
+
+def test_two_thirds_of_modes_slower_and_less_accurate():
+    a, b, pairs = _hands(2, 7, 70)
+    full = morph(a, b, matching=pairs, tol=0.002, max_steps=60)
+    part = morph(a, b, matching=pairs, modes=2 / 3, tol=0.002, max_steps=60)
+    assert part.params["modes"] == round(2 / 3 * 140)
+    assert part.steps > full.steps
+    assert part.mean_distance[-1] > full.mean_distance[-1]
+
+
+def test_removing_rigid_part_takes_fewer_steps():
+    a, b, pairs = _hands(0, 3, 100)
+    moved = _rotate(b, 0.8, scale=1.3, shift=(50, -20))
+    plain = morph(a, moved, matching=pairs)
+    rigid = morph(a, moved, matching=pairs, remove_rigid=True)
+    assert rigid.similarity is not None
+    assert rigid.steps < plain.steps and rigid.converged
+
+
+def test_numerical_damping_with_delta():
+    """delta > 0.5 damps: with the paper's light damping the oscillation about the target
+    dies out sooner."""
+    a, b, pairs = _hands(0, 3, 80)
+    opts = dict(matching=pairs, damping=(0.005, 0.03), max_steps=60, tol=1e-6,
+                equilibrium_tol=0)
+    plain = morph(a, b, **opts)
+    damped = morph(a, b, delta=0.9, alpha=(0.9 + 0.5) ** 2 / 4, **opts)  # (16)
+    late = slice(30, None)
+    assert damped.mean_distance[late].mean() < plain.mean_distance[late].mean()
+
+
+def test_units_do_not_matter():
+    a, b, pairs = _hands(1, 5, 80)
+    r1 = morph(a, b, matching=pairs)
+    r2 = morph(1000 * a, 1000 * b, matching=pairs)
+    assert r1.steps == r2.steps
+    assert_allclose(r2.mean_distance, 1000 * r1.mean_distance, rtol=1e-6)
+    assert_allclose(r2.energy, r1.energy, rtol=1e-6, atol=1e-12)
+
+
+def test_unmatched_nodes_follow_neighbours():
+    a, b, pairs = _hands(0, 3, 120)
+    keep = pairs[::3]  # a third of the nodes matched, as in the paper's heart (43 of 70)
+    r = morph(a, b, matching=keep)
+    assert r.converged
+    # unmatched nodes end near the target contour too (within 2% of its size)
+    from scipy.spatial import cKDTree
+
+    dense = load_hand(3)
+    gap, _ = cKDTree(dense).query(r.shapes[-1])
+    assert gap.mean() < 0.02 * _rms(b)
+    assert self_intersections(r.shapes[-1]) == 0
+
+
+def test_open_contour():
+    a, b, pairs = _hands(0, 3, 100)
+    from modalmorph import Shape
+
+    src = Shape(a[10:90], closed=False)
+    tgt = Shape(b[10:90], closed=False)
+    part = np.c_[np.arange(5, 75, 2), np.arange(5, 75, 2)]  # ends unmatched
+    r = morph(src, tgt, matching=part)
+    assert r.converged and np.isfinite(r.shapes).all()
+
+
+def test_3d_point_sets(rng):
+    a = sphere_points(150, rng, radii=(1.0, 0.8, 0.6))
+    b = a * np.array([1.2, 0.7, 0.9]) + 0.1 * np.sin(3 * a[:, [1, 2, 0]])
+    pairs = np.c_[np.arange(150), np.arange(150)][::2]  # half matched: neighbour rule in 3D
+    r = morph(a, b, matching=pairs)
+    assert r.converged
+    assert r.shapes.shape[1:] == (150, 3)
+    assert np.all(r.energy >= 0)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"k": 0}, "k must be a positive"),
+        ({"dt": -1}, "dt must be a positive"),
+        ({"alpha": 0.1, "delta": 0.5}, "not unconditionally stable"),
+        ({"delta": 0.4}, "not unconditionally stable"),
+        ({"scheme": "magic"}, "scheme must be"),
+        ({"modes": 1.5}, r"fraction must be in \(0, 1\]"),
+        ({"modes": 10_000}, "modes must be None, a count between 1 and 200"),
+        ({"matching": np.zeros((0, 2), int)}, "no node is matched"),
+        ({"matching": np.array([[0, 500]])}, "out of range"),
+        ({"damping": (0.1, -0.1)}, "damping must be two ratios"),
+        ({"max_steps": 0}, "max_steps must be a positive integer"),
+    ],
+)
+def test_bad_options(kwargs, match):
+    a, b, pairs = _hands(0, 3, 100)
+    kwargs.setdefault("matching", pairs)
+    with pytest.raises(ValueError, match=match):
+        morph(a, b, **kwargs)
+
+
+def test_dimension_mismatch(rng):
+    a, _, pairs = _hands(0, 3, 50)
+    with pytest.raises(ValueError, match="same dimension, got 2D and 3D"):
+        morph(a, sphere_points(50, rng), matching=pairs)
