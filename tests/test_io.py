@@ -2,6 +2,7 @@
 
 import json
 import re
+import sys
 import types
 
 import numpy as np
@@ -198,6 +199,16 @@ def test_svg_quadratic_and_transform(tmp_path):
     on_curves = dist[shape.points[:, 1] > 20.5]  # leave out the closing straight edges
     assert on_curves.max() < 0.1  # 2001 samples of a curve about 200 long
     assert_allclose(shape.points[0], [10, 20])
+
+
+def test_svg_rotation_and_matrix(tmp_path):
+    square = "M20 10 L30 10 L30 20 L20 20 Z"
+    body = f'<g transform="rotate(90, 10, 10)"><path d="{square}"/></g><path d="M0 0 H1 V1"/>'
+    shape = read_shape(_svg(tmp_path, body), nodes=4)  # the first path, rotated about (10, 10)
+    assert_allclose(shape.points, [[10, 20], [10, 30], [0, 30], [0, 20]], atol=1e-12)
+    body = f'<path transform="matrix(0 1 -1 0 0 0) translate(1)" d="{square}"/>'
+    shape = read_shape(_svg(tmp_path, body, "matrix.svg"), nodes=4)
+    assert_allclose(shape.points, [[-10, 21], [-10, 31], [-20, 31], [-20, 21]], atol=1e-12)
 
 
 def test_svg_several_subpaths_warns(tmp_path):
@@ -430,6 +441,7 @@ def test_mesh_unreadable(tmp_path):
     ("ragged.json", "[[0, 0], [1, 0, 2], [0, 1]]", "node 1 has 3 coordinates, expected 2"),
     ("nan.json", "[[0, 0], [1, 0], [NaN, 1]]", "node 2 has non-finite coordinates"),
     ("one.json", "[[0, 0]]", "only 1 node"),
+    ("none.json", '{"points": []}', "no points"),
     ("wide.json", "[[0, 0, 0, 0], [1, 0, 0, 0], [0, 1, 0, 0]]", "got shape .3, 4."),
     ("shape.xyz", "0 0\n1 0\n0 1\n", "unknown file extension '.xyz'; supported: .csv, .tsv"),
 ])
@@ -582,3 +594,15 @@ def test_atomic_write(tmp_path):
         raise RuntimeError("boom")
     assert_array_equal(np.load(path), SQUARE)  # untouched
     assert sorted(p.name for p in path.parent.iterdir()) == ["data.npy"]
+
+
+@pytest.mark.parametrize("module, filename, extra", [
+    ("meshio", "a.ply", "modalmorph[mesh]"),
+    ("PIL", "a.png", "modalmorph[images]"),
+    ("skimage.measure", "a.png", "modalmorph[images]"),
+])
+def test_missing_optional_library(tmp_path, monkeypatch, module, filename, extra):
+    monkeypatch.setitem(sys.modules, module, None)  # import fails as if not installed
+    (tmp_path / filename).write_bytes(b"something")
+    with pytest.raises(ImportError, match=re.escape(f"pip install '{extra}'")):
+        read_shape(tmp_path / filename)

@@ -21,6 +21,7 @@ name, so the command line can print it as it is.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -132,8 +133,8 @@ def read_shape(path, *, nodes: int | None = None, threshold: float | None = None
     if nodes is not None and (isinstance(nodes, bool) or not isinstance(nodes, int | np.integer)
                               or nodes < 3):
         raise ValueError(f"nodes must be an integer >= 3, got {nodes!r}")
-    if threshold is not None and not (isinstance(threshold, int | float | np.number)
-                                      and math.isfinite(threshold)):
+    if threshold is not None and (isinstance(threshold, bool) or not (
+            isinstance(threshold, int | float | np.number) and math.isfinite(threshold))):
         raise ValueError(f"threshold must be a finite number, got {threshold!r}")
     if not path.exists():
         raise ValueError(f"{name}: no such file")
@@ -340,7 +341,9 @@ def _read_json(path: Path, name: str):
         data = data["points"]
     if not isinstance(data, list) or not all(isinstance(row, list) for row in data):
         raise ValueError(f"{name}: expected a list of [x, y] or [x, y, z] lists")
-    if data and len({len(row) for row in data}) > 1:
+    if not data:
+        raise ValueError(f"{name}: no points (an empty list)")
+    if len({len(row) for row in data}) > 1:
         first = len(data[0])
         k = next(k for k, row in enumerate(data) if len(row) != first)
         raise ValueError(f"{name}: node {k} has {len(data[k])} coordinates, expected {first} "
@@ -349,7 +352,7 @@ def _read_json(path: Path, name: str):
         for value in row:
             if isinstance(value, bool) or not isinstance(value, int | float):
                 raise ValueError(f"{name}: node {k}: {value!r} is not a number")
-    return np.array(data, dtype=np.float64).reshape(len(data), -1), faces, closed
+    return np.array(data, dtype=np.float64), faces, closed
 
 
 # -- SVG --------------------------------------------------------------------------------
@@ -670,6 +673,8 @@ def _grey_levels(image) -> np.ndarray:
         grey = np.asarray(image)
     else:
         grey = np.asarray(image.convert("L"))
+    if grey.dtype == bool:
+        grey = grey.astype(np.uint8)  # 1-bit images: levels 0 and 1
     if grey.ndim != 2 or min(grey.shape) < 1:
         raise ValueError(f"expected a 2D image, got an array of shape {grey.shape}")
     return grey
@@ -883,6 +888,8 @@ def _json_default(obj):
         return obj.tolist()
     if isinstance(obj, os.PathLike):
         return os.fspath(obj)
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return dataclasses.asdict(obj)
     raise TypeError(f"{type(obj).__name__} {obj!r} is not JSON serializable")
 
 
