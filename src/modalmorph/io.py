@@ -191,7 +191,8 @@ def _make_shape(name, pts, *, faces=None, nodes=None, closed=True) -> Shape:
                          f"{pts[bad[0]].tolist()} ({len(bad)} such node(s))")
     if nodes is not None:
         if pts.shape[1] != 2 or faces is not None:
-            raise ValueError(f"{name}: nodes= resamples 2D contours; this is a 3D shape")
+            raise ValueError(f"{name}: nodes= resamples 2D contours; this is a {pts.shape[1]}D "
+                             f"{'surface' if faces is not None else 'point set'}")
         pts = resample(pts, int(nodes), closed=bool(closed))
     try:
         return Shape(pts, closed=bool(closed), faces=faces)
