@@ -5,23 +5,36 @@ between objects by a physical methodology", with Sclaroff's Gaussian finite elem
 modal matching, Horn alignment, Lagrange's dynamic equilibrium and strain energy.
 """
 
+__version__ = "0.1.0"
+
+from .align import Similarity, align
 from .element import DEFAULT_SIGMA, FEModel
+from .io import read_shape
+from .matching import Matching, match
 from .material import MATERIALS, POLYETHYLENE, RUBBER, UNIT, Material
 from .modes import Modes, rayleigh
-from .shape import Shape
-
-__version__ = "0.1.0"
+from .pipeline import Morph, MorphDivergedError, morph
+from .shape import Shape, resample
 
 __all__ = [
     "DEFAULT_SIGMA",
     "FEModel",
     "MATERIALS",
     "Material",
+    "Matching",
     "Modes",
+    "Morph",
+    "MorphDivergedError",
     "POLYETHYLENE",
     "RUBBER",
     "Shape",
+    "Similarity",
     "UNIT",
     "__version__",
+    "align",
+    "match",
+    "morph",
     "rayleigh",
+    "read_shape",
+    "resample",
 ]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -86,7 +87,8 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
           material: Material = POLYETHYLENE, sigma: float = DEFAULT_SIGMA,
           modes: int | float | None = None, scheme: str = "implicit", tol: float = 0.005,
           tol_distance: float | None = None, max_steps: int = 100,
-          equilibrium_tol: float = 1e-7, neighbours: int = 6) -> Morph:
+          equilibrium_tol: float = 1e-7, neighbours: int = 6,
+          progress: Callable[[int, float], None] | None = None) -> Morph:
     """Estimate the intermediate shapes that take ``source`` into ``target``.
 
     The source is modelled with Sclaroff's Gaussian element, matched nodes are pulled to
@@ -148,6 +150,9 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
         Stop when no node moves by more than this fraction of the source's size in a step.
     neighbours : int, optional
         For unordered 3D objects: how many matched neighbours pull an unmatched node.
+    progress : callable, optional
+        Called after every step as ``progress(step, mean_distance)`` (user units), e.g.
+        to drive a progress bar.
 
     Returns
     -------
@@ -261,6 +266,8 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
                    else "try a smaller dt or k, or more damping"), step)
         T = loads_rule.targets(current)
         record(x, current, T)
+        if progress is not None:
+            progress(step, dist[-1] * size)
         if dist[-1] <= tol_n:
             reason = "tolerance"
         elif moved <= equilibrium_tol:
