@@ -65,6 +65,13 @@ def _axes_for(fig, dim: int):
     return fig.add_subplot(projection="3d" if dim == 3 else None)
 
 
+def _legend_above(ax, handles, labels, **kw):
+    """A frameless one-row legend just above the axes, where it hides no data."""
+    return ax.legend(handles, labels, loc="lower center", bbox_to_anchor=(0.5, 1.0),
+                     ncols=len(handles), frameon=False, fontsize="small",
+                     handlelength=1.6, columnspacing=1.2, **kw)
+
+
 def _is_3d(ax) -> bool:
     return getattr(ax, "name", "") == "3d"
 
@@ -136,7 +143,7 @@ def _finish(ax, points: np.ndarray):
     else:
         ax.update_datalim(points)
         ax.autoscale_view()
-        ax.set_aspect("equal", adjustable="box")
+        ax.set_aspect("equal", adjustable="datalim")
         ax.set(xlabel="x", ylabel="y")
 
 
@@ -256,7 +263,7 @@ def plot_matches(source, target, pairs, *, ax=None):
     handles, labels = ax.get_legend_handles_labels()
     handles.append(Line2D([], [], color=MATCH_COLOR, lw=0.8))
     labels.append(f"matches ({len(pairs)})")
-    ax.legend(handles, labels, loc="best", fontsize="small")
+    _legend_above(ax, handles, labels)
     _finish(ax, np.vstack([src, tgt]))
     return ax
 
@@ -336,7 +343,7 @@ def plot_shapes(morph, *, color_by="energy", every: int = 1, ax=None):
     ax.scatter(*tgt.T, s=size + 3, c=TARGET_COLOR, marker="s", linewidths=0, zorder=5,
                alpha=1.0 if dim == 2 else 0.6)
 
-    mid = cmap(0.5)
+    mid = cmap(0.75)  # a representative colour of the intermediate shapes
     t_style = {"ls": "--"} if len(t_edges) and t_faces is None else {"ls": "none"}
     handles = [
         Line2D([], [], color=SOURCE_COLOR, marker="o", ms=4, ls="none"),
@@ -347,7 +354,7 @@ def plot_shapes(morph, *, color_by="energy", every: int = 1, ax=None):
     inner = ("intermediate shapes" if contour else
              "node paths, final surface" if faces is not None else "node paths, final nodes")
     labels = [f"{src_label} (step 0)", f"{inner} (steps 1-{n_steps - 1})", "target"]
-    ax.legend(handles, labels, loc="best", fontsize="small")
+    _legend_above(ax, handles, labels)
     _colorbar(ax, lines, color_by, n_steps=n_steps)
     _finish(ax, np.vstack([shapes.reshape(-1, dim), tgt]))
     return ax
@@ -390,10 +397,8 @@ def plot_energy(morph, *, ax=None):
     twin.set_ylim(bottom=0.0)
     status = "converged" if getattr(morph, "converged", False) else "not converged"
     reason = getattr(morph, "stop_reason", "")
-    ax.legend([e_line, d_line], [e_line.get_label(), d_line.get_label()],
-              loc="lower center", bbox_to_anchor=(0.5, 1.01), ncols=2, frameon=False,
-              fontsize="small", title=f"{status}: {reason}" if reason else status,
-              title_fontsize="small")
+    _legend_above(ax, [e_line, d_line], [e_line.get_label(), d_line.get_label()],
+                  title=f"{status}: {reason}" if reason else status, title_fontsize="small")
     return ax
 
 
@@ -478,13 +483,18 @@ def animate(morph, path, *, fps: int = 10, color_by="energy", dpi: int = 100) ->
         handles.append(Line2D([], [], color=color, alpha=0.5, marker=marker, ms=3,
                               ls="-" if len(e) else "none", label=label))
     _finish(ax, np.vstack([shapes.reshape(-1, dim), tgt]))
-    ax.set_autoscale_on(False)
     if color_by is not None:
         from matplotlib.cm import ScalarMappable
 
         _colorbar(ax, ScalarMappable(norm=norm, cmap=cmap), color_by)
-    ax.legend(handles=handles, loc="upper right", fontsize="small")
+    ax.legend(handles=handles, loc="lower right", bbox_to_anchor=(1.0, 1.0), ncols=2,
+              frameon=False, fontsize="small")  # the step number goes on the left
     edges = _edges(m, closed, ordered, None)
+    # lay the figure out once, with a title, then freeze it: frames neither jitter nor
+    # pay for the layout again
+    ax.set_title(f"step {n_steps - 1} / {n_steps - 1}", loc="left", fontsize="medium")
+    fig.draw_without_rendering()
+    fig.set_layout_engine("none")
 
     # a unique name beside the target, same suffix (ffmpeg picks its format from it)
     tmp = path.with_name(f".{path.stem}.{os.getpid()}-{secrets.token_hex(4)}.tmp{suffix}")
@@ -495,7 +505,7 @@ def animate(morph, path, *, fps: int = 10, color_by="energy", dpi: int = 100) ->
                 for artist in artists:
                     artist.remove()
                 artists = _draw_frame(ax, shapes[j], edges, faces, values[j], cmap, norm)
-                ax.set_title(f"step {j} / {n_steps - 1}", fontsize="medium")
+                ax.set_title(f"step {j} / {n_steps - 1}", loc="left", fontsize="medium")
                 writer.grab_frame()
         os.replace(tmp, path)
     except BaseException:

@@ -1,0 +1,256 @@
+"""Figures, animations and VTK series of a morph, on fake results (no solver needed)."""
+
+import sys
+import xml.etree.ElementTree as ET
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+pytest.importorskip("matplotlib")
+import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.axes import Axes  # noqa: E402
+from PIL import Image  # noqa: E402
+
+from modalmorph.plot import (  # noqa: E402
+    animate,
+    plot_energy,
+    plot_matches,
+    plot_shapes,
+    save_figures,
+    write_vtk_series,
+)
+
+T = 10
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(autouse=True)
+def _close_figures():
+    yield
+    plt.close("all")
+
+
+def fake_morph(src, tgt, *, closed=True, faces=None, ordered=None, steps=T):
+    """A morph-like result moving ``src`` to ``tgt`` (node i to node i) in ``steps`` steps.
+
+    Loads are target minus current position; the local energy grows with the displacement
+    and is negative on a few nodes, as the real one can be.
+    """
+    m, d = src.shape
+    t = 1.0 - (1.0 - np.linspace(0.0, 1.0, steps + 1)) ** 2  # fast, then slowing down
+    shapes = src + t[:, None, None] * (tgt - src)
+    loads = tgt - shapes
+    disp2 = np.sum((shapes - src) ** 2, axis=2)
+    node_energy = disp2 * np.where(np.arange(m) % 7 == 0, -0.3, 1.0)
+    ordered = d == 2 if ordered is None else ordered
+    return SimpleNamespace(
+        shapes=shapes, loads=loads, energy=disp2.sum(axis=1), node_energy=node_energy,
+        mean_distance=np.linalg.norm(loads, axis=2).mean(axis=1),
+        matching=SimpleNamespace(pairs=np.c_[np.arange(0, m, 2), np.arange(0, m, 2)]),
+        similarity=None, converged=True, stop_reason="mean distance below tolerance",
+        source=SimpleNamespace(points=src, closed=closed, faces=faces, ordered=ordered,
+                               dim=d),
+        target=SimpleNamespace(points=tgt, closed=closed, faces=faces, ordered=ordered,
+                               dim=d),
+        steps=steps,
+    )
+
+
+def circle_to_ellipse(m=40, *, steps=T):
+    a = np.linspace(0.0, 2.0 * np.pi, m, endpoint=False)
+    return fake_morph(np.c_[np.cos(a), np.sin(a)], np.c_[2.0 * np.cos(a), 0.8 * np.sin(a)],
+                      steps=steps)
+
+
+def sphere_to_ellipsoid(n=40, *, surface=True, steps=T):
+    from scipy.spatial import ConvexHull
+
+    i = np.arange(n) + 0.5  # Fibonacci lattice: nearly uniform nodes on the sphere
+    phi, theta = np.arccos(1.0 - 2.0 * i / n), np.pi * (1.0 + 5**0.5) * i
+    p = np.c_[np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)]
+    faces = ConvexHull(p).simplices if surface else None
+    return fake_morph(p, p * [1.5, 1.0, 0.7], faces=faces, steps=steps)
+
+
+MORPHS = {
+    "contour2d": circle_to_ellipse,
+    "surface3d": sphere_to_ellipsoid,
+    "cloud3d": lambda steps=T: sphere_to_ellipsoid(surface=False, steps=steps),
+}
+
+
+@pytest.fixture(params=list(MORPHS))
+def morph(request):
+    return MORPHS[request.param]()
+
+
+def is_3d(ax):
+    return ax.name == "3d"
+
+
+def test_plot_matches(morph):
+    ax = plot_matches(morph.source, morph.target, morph.matching.pairs)
+    assert isinstance(ax, Axes)
+    assert is_3d(ax) == (morph.shapes.shape[2] == 3)
+    labels = ax.get_legend_handles_labels()[1]
+    assert labels == ["source (40 nodes)", "target (40 nodes)"]
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert legend[-1] == f"matches ({len(morph.matching.pairs)})"
+
+
+def test_plot_matches_on_bare_arrays_and_given_axes():
+    morph = circle_to_ellipse()
+    fig, ax = plt.subplots()
+    out = plot_matches(morph.shapes[0], morph.target.points, morph.matching.pairs, ax=ax)
+    assert out is ax
+    assert ax.get_xlabel() == "x" and ax.get_ylabel() == "y"
+
+
+def test_plot_matches_rejects_bad_pairs():
+    morph = circle_to_ellipse()
+    with pytest.raises(ValueError, match=r"pairs must be an integer array of shape \(K, 2\)"):
+        plot_matches(morph.source, morph.target, [0.5, 1.0])
+    with pytest.raises(ValueError, match="pairs index nodes outside"):
+        plot_matches(morph.source, morph.target, [[0, 40]])
+    with pytest.raises(ValueError, match="same dimension"):
+        plot_matches(morph.source, sphere_to_ellipsoid().target, [[0, 0]])
+
+
+@pytest.mark.parametrize(("color_by", "label"), [
+    ("load", "load magnitude"), ("energy", "strain energy per node"), (None, "step"),
+])
+def test_plot_shapes_has_a_labelled_colour_bar(morph, color_by, label):
+    ax = plot_shapes(morph, color_by=color_by)
+    assert isinstance(ax, Axes)
+    cbar_axes = [a for a in ax.figure.axes if a is not ax]
+    assert len(cbar_axes) == 1  # the colour bar
+    assert label in cbar_axes[0].get_ylabel()
+    if not is_3d(ax):
+        assert ax.get_aspect() == 1.0  # equal aspect
+        assert (ax.get_xlabel(), ax.get_ylabel()) == ("x", "y")
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert legend[0].startswith("source") and legend[-1] == "target"
+
+
+def test_plot_shapes_energy_norm_is_centred_on_zero():
+    morph = circle_to_ellipse()  # its local energy has both signs
+    ax = plot_shapes(morph, color_by="energy")
+    lines = ax.collections[0]
+    assert lines.norm.vmin == pytest.approx(-lines.norm.vmax)  # zero in the middle
+    assert lines.norm.vmax == pytest.approx(np.abs(morph.node_energy).max())
+
+
+def test_plot_shapes_draws_every_kth_step_and_the_last():
+    morph = circle_to_ellipse(m=40)
+    ax = plot_shapes(morph, color_by=None, every=3)
+    # steps 0, 3, 6, 9 and 10; each closed contour is 40 edges split in two halves
+    assert len(ax.collections[0].get_segments()) == 5 * 40 * 2
+    assert sorted(set(ax.collections[0].get_array())) == [0, 3, 6, 9, 10]
+
+
+def test_plot_shapes_rejects_bad_options():
+    morph = circle_to_ellipse()
+    with pytest.raises(ValueError, match=r"color_by must be one of 'load', 'energy' or None"):
+        plot_shapes(morph, color_by="stress")
+    with pytest.raises(ValueError, match="every must be a positive integer"):
+        plot_shapes(morph, every=0)
+
+
+def test_plot_energy(morph):
+    ax = plot_energy(morph)
+    assert isinstance(ax, Axes)
+    assert ax.get_xlabel() == "step"
+    twin = [a for a in ax.figure.axes if a is not ax]
+    assert len(twin) == 1 and "mean distance" in twin[0].get_ylabel()
+    ticks = ax.get_xticks()
+    assert np.allclose(ticks, np.round(ticks))  # integer steps
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert len(legend) == 2
+
+
+@pytest.mark.parametrize(("kind", "formats"), [
+    ("contour2d", ("png", "svg")), ("surface3d", ("png",)), ("cloud3d", ("png",)),
+])
+def test_save_figures_writes_what_it_says(tmp_path, kind, formats):
+    morph = MORPHS[kind](steps=4)
+    paths = save_figures(morph, tmp_path / "figs", formats=formats, dpi=40)
+    stems = ["matches", "shapes_plain", "shapes_load", "shapes_energy", "energy"]
+    assert [p.name for p in paths] == [f"{s}.{f}" for s in stems for f in formats]
+    for p in paths:
+        head = p.read_bytes()[:8]
+        assert head == PNG_MAGIC if p.suffix == ".png" else head.startswith(b"<?xml")
+    assert plt.get_fignums() == []  # no pyplot figure left open
+
+
+@pytest.mark.parametrize(("kind", "steps", "color_by"), [
+    ("contour2d", T, "energy"), ("surface3d", 3, "load"), ("cloud3d", 3, None),
+])
+def test_animate_writes_one_gif_frame_per_step(tmp_path, kind, steps, color_by):
+    morph = MORPHS[kind](steps=steps)
+    path = animate(morph, tmp_path / "morph.gif", fps=5, color_by=color_by, dpi=30)
+    assert path == tmp_path / "morph.gif"
+    with Image.open(path) as im:
+        assert im.format == "GIF"
+        assert im.n_frames == steps + 1
+    assert [p.name for p in tmp_path.iterdir()] == ["morph.gif"]  # no temporary left
+    assert plt.get_fignums() == []
+
+
+def test_animate_rejects_unknown_formats_and_mp4_without_ffmpeg(tmp_path, monkeypatch):
+    from matplotlib import animation
+
+    morph = circle_to_ellipse()
+    with pytest.raises(ValueError, match=r"\.gif or \.mp4"):
+        animate(morph, tmp_path / "morph.avi")
+    with pytest.raises(ValueError, match="color_by must be one of"):
+        animate(morph, tmp_path / "morph.gif", color_by="strain")
+    monkeypatch.setattr(animation.writers, "is_available", lambda name: False)
+    with pytest.raises(ValueError, match="ffmpeg"):
+        animate(morph, tmp_path / "morph.mp4")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_animate_leaves_no_partial_file_on_failure(tmp_path, monkeypatch):
+    from matplotlib import animation
+
+    grab = animation.PillowWriter.grab_frame
+
+    def fail_after_first_frame(self, **kwargs):
+        if self._frames:  # one frame grabbed: finish() will write a truncated file
+            raise RuntimeError("disk full")
+        grab(self, **kwargs)
+
+    monkeypatch.setattr(animation.PillowWriter, "grab_frame", fail_after_first_frame)
+    with pytest.raises(RuntimeError, match="disk full"):
+        animate(circle_to_ellipse(steps=3), tmp_path / "morph.gif", dpi=30)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_write_vtk_series(tmp_path, morph):
+    meshio = pytest.importorskip("meshio")
+    pvd = write_vtk_series(morph, tmp_path / "vtk")
+    entries = ET.parse(pvd).getroot().find("Collection").findall("DataSet")
+    assert [int(e.get("timestep")) for e in entries] == list(range(T + 1))
+    files = sorted(p.name for p in pvd.parent.glob("*.vtu"))
+    assert [e.get("file") for e in entries] == files and len(files) == T + 1
+    last = meshio.read(pvd.parent / files[-1])
+    m = morph.shapes.shape[1]
+    assert last.points.shape == (m, 3)
+    np.testing.assert_allclose(last.points[:, : morph.shapes.shape[2]], morph.shapes[-1])
+    assert last.point_data["load"].shape == (m, 3)
+    np.testing.assert_allclose(last.point_data["energy"], morph.node_energy[-1])
+    expected = {"contour2d": "line", "surface3d": "triangle", "cloud3d": "vertex"}
+    kind = ("contour2d" if morph.shapes.shape[2] == 2 else
+            "surface3d" if morph.source.faces is not None else "cloud3d")
+    assert last.cells[0].type == expected[kind]
+
+
+def test_missing_extras_name_what_to_install(tmp_path, monkeypatch):
+    morph = circle_to_ellipse()
+    monkeypatch.setitem(sys.modules, "meshio", None)
+    with pytest.raises(ImportError, match=r"modalmorph\[mesh\]"):
+        write_vtk_series(morph, tmp_path)
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    with pytest.raises(ImportError, match=r"modalmorph\[plot\]"):
+        save_figures(morph, tmp_path)
