@@ -1,0 +1,476 @@
+"""Correspondence between two objects by modal matching (method.md §2).
+
+Each object is modelled with Sclaroff's Gaussian element and its vibration modes are
+computed (6); row ``i`` of ``Phi`` (one value per mode and axis) describes how node ``i``
+moves in each mode, and nodes of the two objects that move alike are partners. Three
+searches are offered:
+
+``"local"``
+    The paper's search: ``i <-> j`` when ``j`` is the best of row ``i`` and ``i`` the best
+    of column ``j`` of the affinity matrix ``Z`` (8).
+``"global"``
+    An assignment over ``Z`` (:func:`scipy.optimize.linear_sum_assignment`), minus the
+    pairs that cost far more than the typical pair (an assignment always returns
+    ``min(m, n)`` pairs).
+``"auto"`` (default)
+    The modal description made invariant to what the paper leaves open (pose, eigenvector
+    sign, rotations inside degenerate eigenspaces, mode order), combined with position,
+    and alternated with Horn's alignment (:func:`modalmorph.align.align`) and a smooth
+    deformation in the lowest modes. Ordered contours are matched by an order-preserving
+    (cyclic for closed ones) search; point clouds by assignment. See :func:`match`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from scipy.spatial import cKDTree
+
+from .align import Similarity, align
+from .element import FEModel, gram_entries
+from .shape import Shape, as_shape
+
+__all__ = ["Matching", "match", "modal_features", "affinity", "METHODS"]
+
+METHODS = ("auto", "local", "global")
+
+# Defaults chosen by measurement on benchmarks/matching.py (see the module docstring there).
+DEFAULT_MODES = 24  # modes used by the paper's local/global searches
+DEFAULT_SIGMA = 2.0  # Gaussian width for matching, x mean node spacing of the model
+MAX_MODEL_NODES = 160  # larger objects are modelled on an evenly spread subset of nodes
+_COARSE_NODES = 64  # resolution of the pose search of the default method
+_ANGLES = 24  # rotations tried by the pose search in 2D
+
+
+@dataclass(frozen=True, eq=False)
+class Matching:
+    """Correspondences between the nodes of a source and a target object.
+
+    Attributes
+    ----------
+    pairs : ndarray of intp, shape (K, 2)
+        ``(source index, target index)`` per pair, sorted by source index.
+    cost : ndarray, shape (K,)
+        The cost of each pair: its entry in the affinity ``Z`` (8) for ``"local"`` and
+        ``"global"``; for ``"auto"`` the combined modal and positional cost after the
+        final alignment (squared distance in units of the target's node spacing).
+    method : str
+        The search used.
+    modes : int
+        Number of modes that described each node.
+    sigma : float
+        Gaussian width of the models, as a multiple of their mean node spacing.
+    similarity : Similarity or None
+        For ``"auto"``: the similarity (in user coordinates) that maps the source onto the
+        target, from Horn's method on the final pairs; ``None`` otherwise.
+    shape : tuple of int
+        ``(m, n)``, the node counts of source and target.
+    """
+
+    pairs: np.ndarray
+    cost: np.ndarray
+    method: str
+    modes: int
+    sigma: float
+    similarity: Similarity | None
+    shape: tuple
+
+    @property
+    def source(self) -> np.ndarray:
+        """Source indices of the pairs, shape (K,)."""
+        return self.pairs[:, 0]
+
+    @property
+    def target(self) -> np.ndarray:
+        """Target indices of the pairs, shape (K,)."""
+        return self.pairs[:, 1]
+
+    def __len__(self) -> int:
+        return self.pairs.shape[0]
+
+
+# --------------------------------------------------------------------------- modal model
+
+
+def _model_subset(shape: Shape, max_nodes: int) -> np.ndarray:
+    """Indices of at most ``max_nodes`` nodes spread evenly (along the order if ordered)."""
+    m = shape.m
+    if m <= max_nodes:
+        return np.arange(m)
+    if shape.ordered:
+        return np.unique(np.linspace(0, m, max_nodes, endpoint=not shape.closed)
+                         .astype(np.intp) % m)
+    # unordered: farthest-point sampling from the node nearest the centroid (deterministic)
+    x = shape.normalized
+    chosen = [int(np.argmin(np.sum(x**2, axis=1)))]
+    dist = np.sum((x - x[chosen[0]]) ** 2, axis=1)
+    for _ in range(max_nodes - 1):
+        k = int(np.argmax(dist))
+        chosen.append(k)
+        dist = np.minimum(dist, np.sum((x - x[k]) ** 2, axis=1))
+    return np.sort(np.array(chosen, dtype=np.intp))
+
+
+def modal_features(shape, n_modes: int, *, sigma: float = DEFAULT_SIGMA,
+                   max_nodes: int = MAX_MODEL_NODES) -> tuple[np.ndarray, np.ndarray]:
+    """The lowest modes of an object, one row per node, made comparable between objects.
+
+    The object is modelled in its normalised frame (6). When it has more than
+    ``max_nodes`` nodes, the model is built on an evenly spread subset and the modes are
+    evaluated at every node through the element's own interpolation,
+    ``u(x) = sum_k g_k(x) psi_k`` (1)-(3) with ``Phi = (I kron G) psi``; at the model's
+    nodes this is exactly ``Phi``. Each mode is scaled to unit RMS displacement per node,
+    so objects with different node counts are comparable (method.md §2).
+
+    Parameters
+    ----------
+    shape : Shape or array_like, shape (m, d)
+    n_modes : int
+        Number of modes, lowest first.
+    sigma : float, optional
+        Gaussian width as a multiple of the model's mean node spacing.
+    max_nodes : int, optional
+        Largest model built (the eigenproblem is dense: cost grows as nodes cubed).
+
+    Returns
+    -------
+    phi : ndarray, shape (m, d, n_modes)
+        Displacement of node ``i`` along axis ``a`` in mode ``k``, in the normalised frame.
+    frequencies : ndarray, shape (n_modes,)
+    """
+    shape = as_shape(shape)
+    subset = _model_subset(shape, max_nodes)
+    model_shape = shape if len(subset) == shape.m else Shape(
+        shape.points[subset], closed=shape.closed, ordered=shape.ordered)
+    model = FEModel(model_shape, sigma=sigma)
+    n_modes = min(int(n_modes), model.dim * model.m)
+    modes = model.modes(n_modes)
+    d = shape.dim
+    if len(subset) == shape.m:
+        phi = modes.node_shapes()
+    else:
+        x = model_shape.to_normalized(shape.points)
+        g, _ = gram_entries(model.points[None, :, :] - x[:, None, :], model.sigma)
+        psi = modes.gaussian.reshape(d, model.m, n_modes)
+        phi = np.einsum("ik,akn->ian", g, psi)  # u(x_i) = sum_k g_k(x_i) psi_k
+    rms = np.sqrt(np.mean(np.sum(phi**2, axis=1), axis=0))
+    return phi / rms, modes.frequencies
+
+
+def _fix_signs(phi1: np.ndarray, phi2: np.ndarray) -> np.ndarray:
+    """Flip each target mode to the sign under which its per-node displacement vectors lie
+    closest (symmetric Chamfer distance) to the source's: the sign is arbitrary (§2)."""
+    out = phi2.copy()
+    for k in range(phi1.shape[2]):
+        a = phi1[:, :, k]
+        tree_a = cKDTree(a)
+        costs = []
+        for s in (1.0, -1.0):
+            b = s * phi2[:, :, k]
+            costs.append(cKDTree(b).query(a)[0].mean() + tree_a.query(b)[0].mean())
+        if costs[1] < costs[0]:
+            out[:, :, k] *= -1
+    return out
+
+
+def affinity(phi1: np.ndarray, phi2: np.ndarray) -> np.ndarray:
+    """Modal affinity (8): ``Z_ij = sum_a sum_k (phi1[i, a, k] - phi2[j, a, k])^2``.
+
+    Parameters
+    ----------
+    phi1 : ndarray, shape (m, d, k)
+    phi2 : ndarray, shape (n, d, k)
+
+    Returns
+    -------
+    ndarray, shape (m, n)
+    """
+    a = phi1.reshape(phi1.shape[0], -1)
+    b = phi2.reshape(phi2.shape[0], -1)
+    Z = np.sum(a**2, axis=1)[:, None] + np.sum(b**2, axis=1)[None, :] - 2 * a @ b.T
+    return np.maximum(Z, 0.0)
+
+
+# --------------------------------------------------------------------------- searches
+
+
+def _mutual_best(Z: np.ndarray) -> np.ndarray:
+    """Pairs ``(i, j)`` with ``j`` best in row ``i`` and ``i`` best in column ``j``."""
+    j = np.argmin(Z, axis=1)
+    i = np.arange(Z.shape[0])
+    keep = np.argmin(Z, axis=0)[j] == i
+    return np.c_[i[keep], j[keep]]
+
+
+def _reject(cost: np.ndarray, factor: float) -> np.ndarray:
+    """Mask of the pairs whose cost is not implausibly high: at most ``factor`` times the
+    median cost (and at least the median, so that a clean matching loses nothing)."""
+    if cost.size == 0:
+        return np.ones(0, bool)
+    return cost <= factor * max(float(np.median(cost)), 1e-12)
+
+
+def _monotone(C: np.ndarray, skip: float, *, strict: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Order-preserving matching: ``j(i)`` non-decreasing (increasing when ``strict``) in
+    ``i``, each source node matched or skipped at cost ``skip``; minimal total cost.
+
+    ``C`` has shape (..., m, n) (a batch of problems). A dynamic programme over source
+    nodes; within a row the best predecessor is a running minimum
+    (``np.minimum.accumulate``), so each row costs O(n) vectorised work. Returns ``j`` of
+    shape (..., m), -1 where the source node is unmatched, and the total cost (...,).
+    """
+    *batch, m, n = C.shape
+    F = np.zeros((*batch, n))  # best cost of rows < i whose last target is <= j
+    took = np.empty((m, *batch, n), bool)
+    arg = np.empty((m, *batch, n), np.intp)
+    idx = np.arange(n)
+    for i in range(m):
+        if strict:  # the previous target must be < j; before target 0 all rows skipped
+            prev = np.concatenate([np.full((*batch, 1), skip * i), F[..., :-1]], axis=-1)
+        else:
+            prev = F
+        T = C[..., i, :] + prev
+        run = np.minimum.accumulate(T, axis=-1)
+        arg[i] = np.maximum.accumulate(np.where(run == T, idx, 0), axis=-1)
+        skipped = F + skip
+        took[i] = run < skipped
+        F = np.minimum(run, skipped)
+    j = np.full((*batch, m), -1, np.intp)
+    cur = np.full(batch, n - 1, np.intp)
+    for i in range(m - 1, -1, -1):  # backtrack
+        ok = cur >= 0
+        c = np.maximum(cur, 0)[..., None]
+        t = np.take_along_axis(took[i], c, axis=-1)[..., 0] & ok
+        a = np.take_along_axis(arg[i], c, axis=-1)[..., 0]
+        j[..., i] = np.where(t, a, -1)
+        cur = np.where(t, a - 1 if strict else a, cur)
+    return j, F[..., -1]
+
+
+def _signature(phi: np.ndarray, width: int) -> np.ndarray:
+    """Pose-, sign- and eigenspace-invariant description of each node from its modes.
+
+    ``|phi_k(i)|^2`` does not change with a rotation of the object or the sign of mode
+    ``k``; summed over a window of ``width`` consecutive modes it does not change either
+    with a rotation inside a (near-)degenerate eigenspace or a swap of close modes.
+    Returns (m, ceil(k / width)), each column with unit mean.
+    """
+    energy = np.sum(phi**2, axis=1)  # (m, k)
+    k = energy.shape[1]
+    starts = np.arange(0, k, width)
+    sig = np.add.reduceat(energy, starts, axis=1)
+    return sig / sig.mean(axis=0)
+
+
+def _sq_dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.maximum(np.sum(a**2, axis=1)[:, None] + np.sum(b**2, axis=1)[None, :]
+                      - 2 * a @ b.T, 0.0)
+
+
+def _rotations(d: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Candidate rotations (r, d, d) for the pose search: a circle of angles in 2D; in 3D
+    the proper rotations between the principal axes of x and y (axis signs searched)."""
+    if d == 2:
+        t = 2 * np.pi * np.arange(_ANGLES) / _ANGLES
+        c, s = np.cos(t), np.sin(t)
+        return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+    ex = np.linalg.eigh(x.T @ x)[1]
+    ey = np.linalg.eigh(y.T @ y)[1]
+    out = []
+    for signs in np.array(np.meshgrid([1, -1], [1, -1], [1, -1])).T.reshape(-1, 3):
+        R = ey @ np.diag(signs) @ ex.T
+        if np.linalg.det(R) > 0:
+            out.append(R)
+    return np.array(out)
+
+
+def _modal_deformation(phi: np.ndarray, freq: np.ndarray, rotation: np.ndarray,
+                       rows: np.ndarray, resid: np.ndarray, stiff: float) -> np.ndarray:
+    """Smooth deformation of the aligned source, in its own lowest modes, towards the pairs.
+
+    Mode superposition ``U = Phi X`` (11), rotated into the target's frame, fitted to the
+    residuals ``resid`` (k, d) of the matched source nodes ``rows`` by least squares plus
+    ``stiff`` times the modal strain energy ``X^T Omega^2 X`` (22), frequencies measured
+    relative to the lowest. Returns the displacement of every source node, (m, d).
+    """
+    B = np.einsum("ab,ibk->iak", rotation, phi)  # (m, d, k)
+    Bm = B[rows].reshape(-1, B.shape[2])
+    w = (freq / freq[0]) ** 2
+    X = np.linalg.solve(Bm.T @ Bm + stiff * len(rows) * np.diag(w), Bm.T @ resid.ravel())
+    return B @ X
+
+
+def _ordered_pairs(C: np.ndarray, closed: bool, skip: float) -> np.ndarray:
+    """Order-preserving pairs over a cost (..., m, n); a closed target is doubled so that
+    the search may start anywhere on it (cyclic). Returns j (..., m) and total (...)."""
+    n = C.shape[-1]
+    m = C.shape[-2]
+    if closed:
+        C = np.concatenate([C, C], axis=-1)
+    j, total = _monotone(C, skip, strict=m <= n)
+    return np.where(j >= 0, j % n, -1), total
+
+
+def _pairs_from_j(j: np.ndarray, cost: np.ndarray, one_to_one: bool) -> np.ndarray:
+    i = np.flatnonzero(j >= 0)
+    pairs = np.c_[i, j[i]]
+    if one_to_one and len(pairs):  # a cyclic search may reuse a target once across the cut
+        order = np.argsort(cost[pairs[:, 0], pairs[:, 1]], kind="stable")
+        _, first = np.unique(pairs[order, 1], return_index=True)
+        pairs = pairs[np.sort(order[first])]
+    return pairs
+
+
+_SKIP = 16.0  # cost of leaving a source node unmatched (squared target spacings)
+_SIG_WEIGHT = 4.0  # weight of the modal signature against position
+_SIG_WIDTH = 2  # modes summed per signature entry
+_ITERATIONS = 4  # alternations of matching, Horn alignment and modal deformation
+_STIFF = 1e-3  # modal strain-energy penalty of the deformation step
+_REJECT = 16.0  # pairs costing more than this (squared target spacings) are dropped
+
+
+def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: float,
+                options: dict) -> tuple[np.ndarray, np.ndarray, Similarity]:
+    opt = dict(skip=_SKIP, sig_weight=_SIG_WEIGHT, width=_SIG_WIDTH, iterations=_ITERATIONS,
+               stiff=_STIFF, deform=True)
+    opt.update(options)
+    x, y = src.normalized, tgt.normalized
+    m, n, d = src.m, tgt.m, src.dim
+    ordered = bool(src.ordered and tgt.ordered)
+    closed = ordered and src.closed and tgt.closed
+    phi1, w1 = modal_features(src, n_modes, sigma=sigma)
+    phi2, _ = modal_features(tgt, n_modes, sigma=sigma)
+    sig1, sig2 = _signature(phi1, opt["width"]), _signature(phi2, opt["width"])
+    F = opt["sig_weight"] * _sq_dist(sig1, sig2) / sig1.shape[1]
+    h2 = tgt.spacing**2
+
+    # pose search on a coarse subset: every candidate rotation, both target directions
+    ci, cj = _model_subset(src, _COARSE_NODES), _model_subset(tgt, _COARSE_NODES)
+    hc2 = h2 * (n / len(cj)) ** 2
+    rots = _rotations(d, x, y)
+    z = np.einsum("rab,ib->ria", rots, x[ci])
+    yc = y[cj]
+    D = (np.sum(z**2, -1)[:, :, None] + np.sum(yc**2, -1)[None, None, :]
+         - 2 * np.einsum("ria,ja->rij", z, yc)) / hc2
+    C = D + F[np.ix_(ci, cj)]
+    if ordered:
+        Cb = np.concatenate([C, C[:, :, ::-1]])  # forward, then reversed target order
+        j, total = _ordered_pairs(Cb, closed, opt["skip"])
+        best = int(np.argmin(total))
+        reverse = best >= len(rots)
+        jj = j[best]
+        keep = jj >= 0
+        if reverse:
+            jj = len(cj) - 1 - jj
+        pi, pj = ci[keep], cj[jj[keep]]
+    else:
+        reverse = False
+        best_cost, pi, pj = np.inf, None, None
+        for Cr in C:
+            r, c = linear_sum_assignment(Cr)
+            if Cr[r, c].sum() < best_cost:
+                best_cost, pi, pj = Cr[r, c].sum(), ci[r], cj[c]
+    sim = align(x[pi], y[pj])
+
+    order = np.arange(n)[::-1] if reverse else np.arange(n)
+    Fo = F[:, order]
+    yo = y[order]
+    shift = np.zeros_like(x)
+    for it in range(opt["iterations"]):
+        z = sim.apply(x) + shift
+        C = _sq_dist(z, yo) / h2 + Fo
+        if ordered:
+            j, _ = _ordered_pairs(C, closed, opt["skip"])
+            pairs = _pairs_from_j(j, C, one_to_one=m <= n)
+        else:
+            r, c = linear_sum_assignment(C)
+            pairs = np.c_[r, c]
+        if it == opt["iterations"] - 1:
+            break
+        sim = align(x[pairs[:, 0]], yo[pairs[:, 1]])
+        if opt["deform"]:
+            rows = pairs[:, 0]
+            resid = yo[pairs[:, 1]] - sim.apply(x[rows])
+            shift = _modal_deformation(phi1, w1, sim.rotation, rows, resid, opt["stiff"])
+    cost = C[pairs[:, 0], pairs[:, 1]]
+    keep = cost <= reject
+    pairs, cost = pairs[keep], cost[keep]
+    pairs = np.c_[pairs[:, 0], order[pairs[:, 1]]]
+    return pairs, cost, align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]])
+
+
+def match(source, target, *, method: str = "auto", modes: int | None = None,
+          sigma: float = DEFAULT_SIGMA, reject: float | None = None,
+          _options: dict | None = None) -> Matching:
+    """Correspondences between the nodes of two objects by modal matching (6)-(8).
+
+    Parameters
+    ----------
+    source, target : Shape or array_like, shape (m, d) and (n, d)
+        The two objects, of the same dimension ``d`` in {2, 3}; ``m`` and ``n`` may differ.
+        Arrays become :class:`Shape` with its defaults (2D: closed ordered contour; 3D:
+        unordered point cloud); pass a ``Shape`` for an open contour (``closed=False``)
+        or an unordered 2D set (``ordered=False``).
+    method : {"auto", "local", "global"}, optional
+        ``"local"``: mutual best in the affinity ``Z`` (8), the paper's search.
+        ``"global"``: assignment over ``Z`` with rejection of implausible pairs.
+        ``"auto"`` (default): pose-invariant modal signatures plus position, alternated
+        with Horn's alignment and a deformation in the lowest modes; order-preserving
+        (cyclic) search for contours, assignment for point clouds. Invariant to
+        translation, rotation, scale, start node and direction of a contour.
+    modes : int, optional
+        Number of lowest modes describing each node (default 24).
+    sigma : float, optional
+        Gaussian width of the matching models, x mean node spacing (default 2).
+    reject : float, optional
+        Pairs costing more than this are dropped. ``"global"``: a multiple of the median
+        pair cost (default 3). ``"auto"``: squared distance after the final alignment in
+        units of the target's squared node spacing (default 16, i.e. 4 spacings).
+        ``"local"`` rejects nothing.
+
+    Returns
+    -------
+    Matching
+
+    Raises
+    ------
+    ValueError
+        If an object is invalid (see :class:`Shape`), the dimensions differ, or an option
+        is out of range.
+    """
+    src, tgt = as_shape(source, "source"), as_shape(target, "target")
+    if src.dim != tgt.dim:
+        raise ValueError(f"source and target must have the same dimension, got "
+                         f"{src.dim}D and {tgt.dim}D")
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    n_modes = DEFAULT_MODES if modes is None else int(modes)
+    if n_modes < 1:
+        raise ValueError(f"modes must be >= 1, got {modes}")
+    n_modes = min(n_modes, src.dim * min(src.m, tgt.m, MAX_MODEL_NODES))
+    if not (np.isfinite(sigma) and sigma > 0):
+        raise ValueError(f"sigma must be a positive finite number, got {sigma}")
+    if reject is not None and not reject > 0:
+        raise ValueError(f"reject must be > 0, got {reject}")
+    sim = None
+    if method == "auto":
+        pairs, cost, sim = _match_auto(src, tgt, n_modes, sigma,
+                                       _REJECT if reject is None else reject,
+                                       _options or {})
+    else:
+        phi1, _ = modal_features(src, n_modes, sigma=sigma)
+        phi2, _ = modal_features(tgt, n_modes, sigma=sigma)
+        Z = affinity(phi1, _fix_signs(phi1, phi2))  # (8)
+        if method == "local":
+            pairs = _mutual_best(Z)
+        else:
+            r, c = linear_sum_assignment(Z)
+            pairs = np.c_[r, c]
+            keep = _reject(Z[r, c], 3.0 if reject is None else reject)
+            pairs = pairs[keep]
+        cost = Z[pairs[:, 0], pairs[:, 1]]
+    order = np.argsort(pairs[:, 0], kind="stable")
+    return Matching(pairs=pairs[order].astype(np.intp), cost=cost[order], method=method,
+                    modes=n_modes, sigma=float(sigma), similarity=sim, shape=(src.m, tgt.m))
