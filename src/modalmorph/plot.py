@@ -322,12 +322,21 @@ def plot_shapes(morph, *, color_by="energy", every: int = 1, ax=None):
                              linewidths=1.2 if contour else 0.6)
     lines.set_array(vals)
     ax.add_collection(lines)
-    if faces is not None and len(faces):  # the final surface, each face by its nodes' mean
+    if faces is not None and len(faces):  # the final surface
         from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-        surf = Poly3DCollection(shapes[-1][faces], cmap=cmap, norm=norm, alpha=0.9,
-                                edgecolors="0.3", linewidths=0.15, zorder=3)
-        surf.set_array(values[-1][faces].mean(axis=1))
+        tri = shapes[-1][faces]
+        surf = Poly3DCollection(tri, alpha=0.9, edgecolors="0.3", linewidths=0.15, zorder=3)
+        if color_by is None:  # light grey, shaded (either orientation of the faces)
+            normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+            normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+            light = np.abs(normal @ np.array([-0.4, -0.5, 0.77]))
+            surf.set_facecolor(np.c_[np.repeat(0.55 + 0.4 * light[:, None], 3, axis=1),
+                                     np.full(len(tri), 0.9)])
+        else:  # each face coloured by the mean value of its nodes
+            surf.set_cmap(cmap)
+            surf.set_norm(norm)
+            surf.set_array(values[-1][faces].mean(axis=1))
         ax.add_collection3d(surf)
     elif not contour:  # the final cloud's nodes, coloured by their value
         ax.scatter(*shapes[-1].T, c=values[-1], cmap=cmap, norm=norm, s=14, zorder=3,
@@ -345,15 +354,21 @@ def plot_shapes(morph, *, color_by="energy", every: int = 1, ax=None):
 
     mid = cmap(0.75)  # a representative colour of the intermediate shapes
     t_style = {"ls": "--"} if len(t_edges) and t_faces is None else {"ls": "none"}
-    handles = [
-        Line2D([], [], color=SOURCE_COLOR, marker="o", ms=4, ls="none"),
-        Line2D([], [], color=mid, lw=1.5) if contour else
-        Line2D([], [], color=mid, lw=1.0, marker="o", ms=3),
-        Line2D([], [], color=TARGET_COLOR, marker="s", ms=4, **t_style),
-    ]
-    inner = ("intermediate shapes" if contour else
-             "node paths, final surface" if faces is not None else "node paths, final nodes")
-    labels = [f"{src_label} (step 0)", f"{inner} (steps 1-{n_steps - 1})", "target"]
+    last = n_steps - 1
+    handles = [Line2D([], [], color=SOURCE_COLOR, marker="o", ms=4, ls="none"),
+               Line2D([], [], color=mid, lw=1.5 if contour else 1.0)]
+    labels = [f"{src_label} (step 0)",
+              f"intermediate shapes (steps 1-{last})" if contour else "node paths"]
+    if faces is not None and len(faces):
+        from matplotlib.patches import Patch
+
+        handles.append(Patch(facecolor="0.8" if color_by is None else mid, edgecolor="0.35"))
+        labels.append(f"final surface (step {last})")
+    elif not contour:
+        handles.append(Line2D([], [], color=mid, marker="o", ms=4, ls="none"))
+        labels.append(f"final nodes (step {last})")
+    handles.append(Line2D([], [], color=TARGET_COLOR, marker="s", ms=4, **t_style))
+    labels.append("target")
     _legend_above(ax, handles, labels)
     _colorbar(ax, lines, color_by, n_steps=n_steps)
     _finish(ax, np.vstack([shapes.reshape(-1, dim), tgt]))
@@ -398,7 +413,7 @@ def plot_energy(morph, *, ax=None):
     status = "converged" if getattr(morph, "converged", False) else "not converged"
     reason = getattr(morph, "stop_reason", "")
     _legend_above(ax, [e_line, d_line], [e_line.get_label(), d_line.get_label()],
-                  title=f"{status}: {reason}" if reason else status, title_fontsize="small")
+                  title=f"{status} ({reason})" if reason else status, title_fontsize="small")
     return ax
 
 
