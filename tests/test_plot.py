@@ -254,3 +254,12 @@ def test_missing_extras_name_what_to_install(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "matplotlib", None)
     with pytest.raises(ImportError, match=r"modalmorph\[plot\]"):
         save_figures(morph, tmp_path)
+
+
+def test_axes_must_match_the_dimension():
+    fig = plt.figure()
+    flat, deep = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2, projection="3d")
+    with pytest.raises(ValueError, match=r"3D shapes need a 3D Axes"):
+        plot_shapes(sphere_to_ellipsoid(), ax=flat)
+    with pytest.raises(ValueError, match=r"2D shapes need a 2D Axes"):
+        plot_matches(circle_to_ellipse().source, circle_to_ellipse().target, [[0, 0]], ax=deep)

@@ -76,6 +76,16 @@ def _is_3d(ax) -> bool:
     return getattr(ax, "name", "") == "3d"
 
 
+def _check_axes(ax, dim: int):
+    """``ax``, or a new one, after checking that it is 3D exactly when the data are."""
+    if ax is None:
+        return _new_axes(dim)
+    if _is_3d(ax) != (dim == 3):
+        want = "a 3D Axes (projection='3d')" if dim == 3 else "a 2D Axes"
+        raise ValueError(f"{dim}D shapes need {want}, got a {ax.name!r} Axes")
+    return ax
+
+
 # --------------------------------------------------------------------------- topology
 
 
@@ -242,8 +252,7 @@ def plot_matches(source, target, pairs, *, ax=None):
         raise ValueError(f"pairs index nodes outside the source (0..{len(src) - 1}) or "
                          f"the target (0..{len(tgt) - 1})")
     dim = src.shape[1]
-    if ax is None:
-        ax = _new_axes(dim)
+    ax = _check_axes(ax, dim)
     from matplotlib.lines import Line2D
 
     segs = np.stack([src[pairs[:, 0]], tgt[pairs[:, 1]]], axis=1)
@@ -302,8 +311,7 @@ def plot_shapes(morph, *, color_by="energy", every: int = 1, ax=None):
     n_steps, m, dim = shapes.shape
     _, closed, ordered, faces = _describe(morph.source, "morph.source")
     tgt, t_closed, t_ordered, t_faces = _describe(morph.target, "morph.target")
-    if ax is None:
-        ax = _new_axes(dim)
+    ax = _check_axes(ax, dim)
     from matplotlib.lines import Line2D
 
     values = _node_values(morph, color_by)
@@ -502,7 +510,17 @@ def animate(morph, path, *, fps: int = 10, color_by="energy", dpi: int = 100) ->
         from matplotlib.cm import ScalarMappable
 
         _colorbar(ax, ScalarMappable(norm=norm, cmap=cmap), color_by)
-    ax.legend(handles=handles, loc="lower right", bbox_to_anchor=(1.0, 1.0), ncols=2,
+    one = "#1f4e99" if cmap is None else cmap(0.75)
+    if faces is not None:
+        from matplotlib.patches import Patch
+
+        current = Patch(facecolor=one, edgecolor="0.3", label="shape at the step")
+    else:
+        current = Line2D([], [], color=one, lw=2.0, marker="o", ms=3, mec="0.15",
+                         ls="-" if len(_edges(m, closed, ordered, None)) else "none",
+                         label="shape at the step")
+    handles.insert(0, current)
+    ax.legend(handles=handles, loc="lower right", bbox_to_anchor=(1.0, 1.0), ncols=3,
               frameon=False, fontsize="small")  # the step number goes on the left
     edges = _edges(m, closed, ordered, None)
     # lay the figure out once, with a title, then freeze it: frames neither jitter nor
@@ -531,7 +549,7 @@ def animate(morph, path, *, fps: int = 10, color_by="energy", dpi: int = 100) ->
 
 def _draw_frame(ax, points, edges, faces, values, cmap, norm):
     """The artists of one animation frame: the shape at one step, coloured per node."""
-    one = "#1f4e99"  # the shape's colour when not coloured by a quantity
+    one = "#1f4e99"  # the shape's colour when not coloured by a quantity (as in animate)
     if faces is not None:
         from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
@@ -545,15 +563,21 @@ def _draw_frame(ax, points, edges, faces, values, cmap, norm):
     artists = []
     if len(edges):
         kw = {"colors": one} if cmap is None else {"cmap": cmap, "norm": norm}
+        # a dark casing under the coloured line: the moving shape stands out from the
+        # faint source and target even where its colour is pale (values near zero)
+        casing = _line_collection(points[edges], ax, colors="0.15", linewidths=3.0,
+                                  zorder=3, capstyle="round")
+        ax.add_collection(casing)
+        artists.append(casing)
         segs, vals = _half_segments(points, edges, values)
-        lines = _line_collection(segs, ax, linewidths=1.6, zorder=3, capstyle="round", **kw)
+        lines = _line_collection(segs, ax, linewidths=1.8, zorder=3, capstyle="round", **kw)
         if cmap is not None:
             lines.set_array(vals)
         ax.add_collection(lines)
         artists.append(lines)
     kw = {"c": one} if cmap is None else {"c": values, "cmap": cmap, "norm": norm}
-    artists.append(ax.scatter(*points.T, s=8 if len(edges) else 14, linewidths=0, zorder=4,
-                              **kw))
+    artists.append(ax.scatter(*points.T, s=10 if len(edges) else 16, zorder=4,
+                              edgecolors="0.15", linewidths=0.5, **kw))
     return artists
 
 
