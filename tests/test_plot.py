@@ -263,3 +263,19 @@ def test_axes_must_match_the_dimension():
         plot_shapes(sphere_to_ellipsoid(), ax=flat)
     with pytest.raises(ValueError, match=r"2D shapes need a 2D Axes"):
         plot_matches(circle_to_ellipse().source, circle_to_ellipse().target, [[0, 0]], ax=deep)
+
+
+def test_a_real_morph_result(tmp_path):
+    from modalmorph import morph
+
+    a = np.linspace(0.0, 2.0 * np.pi, 30, endpoint=False)
+    result = morph(np.c_[np.cos(a), np.sin(a)],
+                   np.c_[1.6 * np.cos(a), 0.8 * np.sin(a) + 0.1 * np.cos(3 * a)],
+                   remove_rigid=True)
+    paths = save_figures(result, tmp_path, formats=("png",), dpi=30)
+    assert all(p.read_bytes()[:8] == PNG_MAGIC for p in paths)
+    gif = animate(result, tmp_path / "morph.gif", dpi=30)
+    with Image.open(gif) as im:
+        assert im.n_frames == result.steps + 1
+    assert len(list(write_vtk_series(result, tmp_path / "vtk").parent.glob("*.vtu"))) == (
+        result.steps + 1)
