@@ -177,7 +177,7 @@ def _node_values(morph, color_by) -> np.ndarray:
 
 
 def _colormap(color_by, values: np.ndarray):
-    """(cmap, norm) for the values shown; zero is never drawn in white.
+    """(cmap, norm) for the values shown; zero is light grey or dark, never white.
 
     Loads are magnitudes (>= 0): viridis from 0, cut before its pale yellow end. Local
     strain energy can be negative: coolwarm centred on 0 (grey at 0, blue < 0, red > 0),
