@@ -212,9 +212,11 @@ def _reject(cost: np.ndarray, factor: float) -> np.ndarray:
     return cost <= factor * max(float(np.median(cost)), 1e-12)
 
 
-def _monotone(C: np.ndarray, skip: float, *, strict: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Order-preserving matching: ``j(i)`` non-decreasing (increasing when ``strict``) in
-    ``i``, each source node matched or skipped at cost ``skip``; minimal total cost.
+def _monotone(C: np.ndarray, skip: float, repeat: float = np.inf
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Order-preserving matching: ``j(i)`` non-decreasing in ``i``, each source node matched
+    (cost ``C[i, j]``) or skipped (cost ``skip``), a target reused by consecutive source
+    nodes at the extra cost ``repeat`` (``inf``: one-to-one); minimal total cost.
 
     ``C`` has shape (..., m, n) (a batch of problems). A dynamic programme over source
     nodes; within a row the best predecessor is a running minimum
@@ -225,27 +227,29 @@ def _monotone(C: np.ndarray, skip: float, *, strict: bool) -> tuple[np.ndarray, 
     F = np.zeros((*batch, n))  # best cost of rows < i whose last target is <= j
     took = np.empty((m, *batch, n), bool)
     arg = np.empty((m, *batch, n), np.intp)
+    again = np.zeros((m, *batch, n), bool)
     idx = np.arange(n)
     for i in range(m):
-        if strict:  # the previous target must be < j; before target 0 all rows skipped
-            prev = np.concatenate([np.full((*batch, 1), skip * i), F[..., :-1]], axis=-1)
-        else:
-            prev = F
+        # previous target < j; before target 0 every earlier row was skipped
+        prev = np.concatenate([np.full((*batch, 1), skip * i), F[..., :-1]], axis=-1)
+        if np.isfinite(repeat) and i > 0:
+            again[i] = F + repeat < prev  # or previous target == j, at a price
+            prev = np.where(again[i], F + repeat, prev)
         T = C[..., i, :] + prev
         run = np.minimum.accumulate(T, axis=-1)
-        arg[i] = np.maximum.accumulate(np.where(run == T, idx, 0), axis=-1)
+        arg[i] = np.maximum.accumulate(np.where(T == run, idx, 0), axis=-1)
         skipped = F + skip
         took[i] = run < skipped
         F = np.minimum(run, skipped)
     j = np.full((*batch, m), -1, np.intp)
     cur = np.full(batch, n - 1, np.intp)
     for i in range(m - 1, -1, -1):  # backtrack
-        ok = cur >= 0
         c = np.maximum(cur, 0)[..., None]
-        t = np.take_along_axis(took[i], c, axis=-1)[..., 0] & ok
+        t = np.take_along_axis(took[i], c, axis=-1)[..., 0] & (cur >= 0)
         a = np.take_along_axis(arg[i], c, axis=-1)[..., 0]
+        rep = np.take_along_axis(again[i], a[..., None], axis=-1)[..., 0]
         j[..., i] = np.where(t, a, -1)
-        cur = np.where(t, a - 1 if strict else a, cur)
+        cur = np.where(t, np.where(rep, a, a - 1), cur)
     return j, F[..., -1]
 
 
@@ -302,14 +306,14 @@ def _modal_deformation(phi: np.ndarray, freq: np.ndarray, rotation: np.ndarray,
     return B @ X
 
 
-def _ordered_pairs(C: np.ndarray, closed: bool, skip: float) -> np.ndarray:
+def _ordered_pairs(C: np.ndarray, closed: bool, skip: float, repeat: float):
     """Order-preserving pairs over a cost (..., m, n); a closed target is doubled so that
     the search may start anywhere on it (cyclic). Returns j (..., m) and total (...)."""
     n = C.shape[-1]
     m = C.shape[-2]
     if closed:
         C = np.concatenate([C, C], axis=-1)
-    j, total = _monotone(C, skip, strict=m <= n)
+    j, total = _monotone(C, skip, repeat)
     return np.where(j >= 0, j % n, -1), total
 
 
@@ -328,13 +332,16 @@ _SIG_WEIGHT = 4.0  # weight of the modal signature against position
 _SIG_WIDTH = 2  # modes summed per signature entry
 _ITERATIONS = 4  # alternations of matching, Horn alignment and modal deformation
 _STIFF = 1e-3  # modal strain-energy penalty of the deformation step
+_REPEAT = 4.0  # extra cost of one target for consecutive source nodes (squared spacings)
+_TRUST = 4.0  # pairs trusted for the alignment and deformation fits (squared spacings)
 _REJECT = 16.0  # pairs costing more than this (squared target spacings) are dropped
 
 
 def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: float,
                 options: dict) -> tuple[np.ndarray, np.ndarray, Similarity]:
     opt = dict(skip=_SKIP, sig_weight=_SIG_WEIGHT, width=_SIG_WIDTH, iterations=_ITERATIONS,
-               stiff=_STIFF, deform=True)
+               stiff=_STIFF, deform=True, trust=_TRUST, dense=0.95,
+               repeat=_REPEAT)
     opt.update(options)
     x, y = src.normalized, tgt.normalized
     m, n, d = src.m, tgt.m, src.dim
@@ -357,7 +364,8 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
     C = D + F[np.ix_(ci, cj)]
     if ordered:
         Cb = np.concatenate([C, C[:, :, ::-1]])  # forward, then reversed target order
-        j, total = _ordered_pairs(Cb, closed, opt["skip"])
+        j, total = _ordered_pairs(Cb, closed, opt["skip"],
+                                  opt["repeat"] if len(ci) > len(cj) else np.inf)
         best = int(np.argmin(total))
         reverse = best >= len(rots)
         jj = j[best]
@@ -374,6 +382,9 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
                 best_cost, pi, pj = Cr[r, c].sum(), ci[r], cj[c]
     sim = align(x[pi], y[pj])
 
+    # one target per source node, unless the source is denser than the target
+    denser = src.spacing * sim.scale < opt["dense"] * tgt.spacing
+    repeat = opt["repeat"] if denser else np.inf
     order = np.arange(n)[::-1] if reverse else np.arange(n)
     Fo = F[:, order]
     yo = y[order]
@@ -382,17 +393,20 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
         z = sim.apply(x) + shift
         C = _sq_dist(z, yo) / h2 + Fo
         if ordered:
-            j, _ = _ordered_pairs(C, closed, opt["skip"])
-            pairs = _pairs_from_j(j, C, one_to_one=m <= n)
+            j, _ = _ordered_pairs(C, closed, opt["skip"], repeat)
+            pairs = _pairs_from_j(j, C, one_to_one=not denser)
         else:
             r, c = linear_sum_assignment(C)
             pairs = np.c_[r, c]
         if it == opt["iterations"] - 1:
             break
-        sim = align(x[pairs[:, 0]], yo[pairs[:, 1]])
+        good = pairs[C[pairs[:, 0], pairs[:, 1]] <= opt["trust"]]
+        if len(good) < max(d + 1, len(pairs) // 4):  # too few trusted: use them all
+            good = pairs
+        sim = align(x[good[:, 0]], yo[good[:, 1]])
         if opt["deform"]:
-            rows = pairs[:, 0]
-            resid = yo[pairs[:, 1]] - sim.apply(x[rows])
+            rows = good[:, 0]
+            resid = yo[good[:, 1]] - sim.apply(x[rows])
             shift = _modal_deformation(phi1, w1, sim.rotation, rows, resid, opt["stiff"])
     cost = C[pairs[:, 0], pairs[:, 1]]
     keep = cost <= reject
