@@ -22,6 +22,7 @@ searches are offered:
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -237,7 +238,7 @@ def _monotone(C: np.ndarray, skip: float, repeat: float = np.inf
             prev = np.where(again[i], F + repeat, prev)
         T = C[..., i, :] + prev
         run = np.minimum.accumulate(T, axis=-1)
-        arg[i] = np.maximum.accumulate(np.where(T == run, idx, 0), axis=-1)
+        arg[i] = np.maximum.accumulate(np.where(run == T, idx, 0), axis=-1)
         skipped = F + skip
         took[i] = run < skipped
         F = np.minimum(run, skipped)
@@ -273,17 +274,29 @@ def _sq_dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
                       - 2 * a @ b.T, 0.0)
 
 
+def _axes(x: np.ndarray) -> np.ndarray:
+    """Principal axes of centred points as the columns of a proper rotation, each axis
+    signed by the third moment along it: they turn with the points (rotation covariant)."""
+    _, e = np.linalg.eigh(x.T @ x)
+    e = e * np.where(np.sum((x @ e) ** 3, axis=0) < 0, -1.0, 1.0)
+    if np.linalg.det(e) < 0:
+        e[:, 0] = -e[:, 0]
+    return e
+
+
 def _rotations(d: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Candidate rotations (r, d, d) for the pose search: a circle of angles in 2D; in 3D
-    the proper rotations between the principal axes of x and y (axis signs searched)."""
+    """Candidate rotations (r, d, d) taking x towards y for the pose search: in 2D a circle
+    of angles starting at the rotation between the principal axes (so the search turns
+    with either input); in 3D the proper rotations between the principal axes, with every
+    choice of axis signs."""
+    ex, ey = _axes(x), _axes(y)
     if d == 2:
+        R0 = ey @ ex.T
         t = 2 * np.pi * np.arange(_ANGLES) / _ANGLES
         c, s = np.cos(t), np.sin(t)
-        return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
-    ex = np.linalg.eigh(x.T @ x)[1]
-    ey = np.linalg.eigh(y.T @ y)[1]
+        return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2) @ R0
     out = []
-    for signs in np.array(np.meshgrid([1, -1], [1, -1], [1, -1])).T.reshape(-1, 3):
+    for signs in itertools.product([1.0, -1.0], repeat=3):
         R = ey @ np.diag(signs) @ ex.T
         if np.linalg.det(R) > 0:
             out.append(R)
@@ -310,7 +323,6 @@ def _ordered_pairs(C: np.ndarray, closed: bool, skip: float, repeat: float):
     """Order-preserving pairs over a cost (..., m, n); a closed target is doubled so that
     the search may start anywhere on it (cyclic). Returns j (..., m) and total (...)."""
     n = C.shape[-1]
-    m = C.shape[-2]
     if closed:
         C = np.concatenate([C, C], axis=-1)
     j, total = _monotone(C, skip, repeat)
@@ -344,7 +356,7 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
                repeat=_REPEAT)
     opt.update(options)
     x, y = src.normalized, tgt.normalized
-    m, n, d = src.m, tgt.m, src.dim
+    n, d = tgt.m, src.dim
     ordered = bool(src.ordered and tgt.ordered)
     closed = ordered and src.closed and tgt.closed
     phi1, w1 = modal_features(src, n_modes, sigma=sigma)
