@@ -1,0 +1,189 @@
+"""Modal matching (method.md §2): exactness, invariance, m != n, 3D, open contours, errors."""
+
+import itertools
+
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+
+from modalmorph.datasets import load_hand
+from modalmorph.matching import Matching, _monotone, affinity, match, modal_features
+from modalmorph.shape import Shape
+
+from .conftest import sphere_points
+
+HAND = load_hand(0)
+
+
+def _hand(n, phase=0.0):
+    rows = (phase + np.arange(n) * len(HAND) / n).astype(int) % len(HAND)
+    return HAND[rows], rows
+
+
+def _similarity(pts, rng, angle=None):
+    t = rng.uniform(-np.pi, np.pi) if angle is None else angle
+    R = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+    return rng.uniform(0.5, 2.0) * pts @ R.T + rng.uniform(-300, 300, 2)
+
+
+def _cyclic_error(a, b, n):
+    e = np.abs(a - b) % n
+    return np.minimum(e, n - e)
+
+
+@pytest.fixture(scope="module")
+def hand90():
+    return _hand(90)[0]
+
+
+@pytest.mark.parametrize("method", ["auto", "local", "global"])
+def test_identical_shapes_match_perfectly(method, hand90):
+    result = match(hand90, hand90, method=method)
+    assert isinstance(result, Matching)
+    assert result.pairs.dtype == np.intp and result.pairs.shape[1] == 2
+    assert result.cost.shape == (len(result),)
+    assert_array_equal(result.pairs[:, 0], result.pairs[:, 1])  # every pair is i <-> i
+    if method != "local":  # mutual best keeps only a subset by design
+        assert len(result) == len(hand90)
+
+
+def test_similarity_transform_matches_perfectly(hand90, rng):
+    for _ in range(3):
+        moved = _similarity(hand90, rng)
+        result = match(hand90, moved)
+        assert len(result) == len(hand90)
+        assert_array_equal(result.pairs[:, 0], result.pairs[:, 1])
+        # the similarity found maps the source onto the target (to rounding)
+        assert np.abs(result.similarity.apply(hand90) - moved).max() < 1e-8 * 600
+
+
+def test_start_index_and_direction(hand90, rng):
+    shift = 37
+    rolled = np.roll(hand90, -shift, axis=0)  # target j is source j + shift
+    result = match(hand90, rolled)
+    assert_array_equal((result.pairs[:, 1] + shift) % 90, result.pairs[:, 0])
+    reversed_ = hand90[::-1]  # target node j is source node 89 - j
+    result = match(hand90, reversed_)
+    assert_array_equal(89 - result.pairs[:, 1], result.pairs[:, 0])
+
+
+@pytest.mark.parametrize("method", ["auto", "local", "global"])
+def test_invariant_to_translation_and_scale(method, hand90, rng):
+    source, target = hand90, _hand(80, phase=5.0)[0]
+    ref = match(source, target, method=method)
+    moved = match(3.5 * source + 1000.0, 0.2 * target - 7.0, method=method)
+    assert_array_equal(moved.pairs, ref.pairs)
+
+
+def test_auto_invariant_to_rotation_of_either_input(hand90, rng):
+    source, target = hand90, _hand(80, phase=5.0)[0]
+    ref = match(source, target).pairs
+    assert_array_equal(match(_similarity(source, rng, np.pi / 2), target).pairs, ref)
+    assert_array_equal(match(source, _similarity(target, rng, -np.pi + 0.1)).pairs, ref)
+
+
+@pytest.mark.parametrize(("m", "n"), [(80, 150), (150, 80)])
+def test_different_node_counts(m, n):
+    (source, rows_s), (target, rows_t) = _hand(m, 0.3), _hand(n, 2.7)
+    result = match(source, target)
+    assert result.shape == (m, n)
+    assert result.pairs[:, 0].max() < m and result.pairs[:, 1].max() < n
+    err = _cyclic_error(rows_s[result.pairs[:, 0]], rows_t[result.pairs[:, 1]], len(HAND))
+    tol = len(HAND) / min(m, n)  # +-1 node of the coarser sampling
+    assert np.mean(err <= tol) >= 0.95  # a clean resampling: nearly every pair right
+    assert len(result) >= 0.95 * m if m <= n else len(result) >= 0.9 * m  # many-to-one
+
+
+def test_missing_stretch(rng):
+    (source, rows_s), (target, rows_t) = _hand(150), _hand(150, 4.0)
+    keep = np.r_[0:60, 75:150]  # 10% of the target missing
+    result = match(source, _similarity(target[keep], rng))
+    err = _cyclic_error(rows_s[result.pairs[:, 0]], rows_t[keep][result.pairs[:, 1]],
+                        len(HAND))
+    assert np.mean(err <= len(HAND) / 150) >= 0.95  # precision on the rest
+
+
+def test_open_contour():
+    (source, rows_s), (target, rows_t) = _hand(140), _hand(120, 3.0)
+    source, target = Shape(source[:100], closed=False), Shape(target[:86], closed=False)
+    result = match(source, target)
+    err = np.abs(rows_s[result.pairs[:, 0]] - rows_t[result.pairs[:, 1]])
+    assert np.mean(err <= len(HAND) / 120) >= 0.95
+
+
+def test_3d_point_cloud(rng):
+    cloud = sphere_points(90, rng, radii=(1.0, 0.7, 0.4))
+    perm = rng.permutation(90)
+    q, r = np.linalg.qr(rng.standard_normal((3, 3)))
+    q = q * np.sign(np.diag(r)) * np.sign(np.linalg.det(q * np.sign(np.diag(r))))
+    target = 2.0 * cloud[perm] @ q.T + 5.0
+    result = match(cloud, target)
+    assert len(result) == 90
+    assert_array_equal(perm[result.pairs[:, 1]], result.pairs[:, 0])  # exact partners
+
+
+def test_deterministic(hand90):
+    target = _hand(70, 1.0)[0]
+    a, b = match(hand90, target), match(hand90, target)
+    assert_array_equal(a.pairs, b.pairs)
+    assert_array_equal(a.cost, b.cost)
+
+
+def test_matching_is_frozen(hand90):
+    result = match(hand90, hand90, method="local")
+    with pytest.raises(AttributeError):
+        result.pairs = None
+    assert result.modes >= 1 and result.sigma > 0 and result.method == "local"
+
+
+def test_modal_features_comparable_across_node_counts():
+    for n in (60, 400):  # the subset model plus interpolation above MAX_MODEL_NODES
+        phi, freq = modal_features(_hand(n)[0], 10)
+        assert phi.shape == (n, 2, 10) and freq.shape == (10,)
+        rms = np.sqrt(np.mean(np.sum(phi**2, axis=1), axis=0))
+        np.testing.assert_allclose(rms, 1.0, rtol=1e-12)  # unit RMS per mode
+    a = np.random.default_rng(3).standard_normal((5, 2, 4))
+    np.testing.assert_allclose(np.diag(affinity(a, a)), 0.0, atol=1e-12)  # (8) Z_ii = 0
+
+
+def test_monotone_search_is_optimal():
+    rng = np.random.default_rng(11)
+
+    def brute(C, skip, repeat):
+        best = np.inf
+        for js in itertools.product(range(-1, C.shape[1]), repeat=C.shape[0]):
+            cost, last = 0.0, -1
+            for i, j in enumerate(js):
+                if j < 0:
+                    cost += skip
+                    continue
+                if j < last or (j == last and not np.isfinite(repeat)):
+                    cost = np.inf
+                    break
+                cost += C[i, j] + (repeat if j == last else 0.0)
+                last = j
+            best = min(best, cost)
+        return best
+
+    for _ in range(60):
+        C = rng.random(tuple(rng.integers(1, 5, 2)))
+        for repeat in (np.inf, 0.3):
+            _, total = _monotone(C, 0.5, repeat)
+            assert abs(total - brute(C, 0.5, repeat)) < 1e-12  # exact optimum
+
+
+def test_bad_input(hand90):
+    with pytest.raises(ValueError, match="same dimension"):
+        match(hand90, np.random.default_rng(0).standard_normal((50, 3)))
+    with pytest.raises(ValueError, match="target must have at least 3 nodes"):
+        match(hand90, hand90[:2])
+    with pytest.raises(ValueError, match="source must have shape"):
+        match(np.zeros((5, 4)), hand90)
+    with pytest.raises(ValueError, match="method must be one of"):
+        match(hand90, hand90, method="hungarian")
+    with pytest.raises(ValueError, match="modes must be >= 1"):
+        match(hand90, hand90, modes=0)
+    with pytest.raises(ValueError, match="sigma must be"):
+        match(hand90, hand90, sigma=-1.0)
+    with pytest.raises(ValueError, match="reject must be"):
+        match(hand90, hand90, reject=0.0)
