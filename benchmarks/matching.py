@@ -22,8 +22,9 @@ independently), ``rotation`` (any angle, plus a translation), ``scale`` (0.5-2x)
 ``noise`` (Gaussian, 2% of the size, about 0.3 node spacing), ``drop10`` (a contiguous
 10% of the target missing) and ``combined`` (all of them, moderate warp).
 
-Run ``python benchmarks/matching.py`` (about 3 minutes on 2 loaded cores) or with
-``--quick``. Timings are wall-clock medians per pair on whatever machine runs this.
+Run ``python benchmarks/matching.py`` (2 pairs per family, about 3 minutes on 2 loaded
+cores), ``--trials 4`` for the table in the report (about 6 minutes), or ``--quick``.
+Timings are wall-clock medians per pair on whatever machine runs this.
 """
 
 from __future__ import annotations
@@ -183,12 +184,12 @@ def time_large(repeats=3):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="2 trials per family, no CPD")
-    ap.add_argument("--trials", type=int, default=None, help="pairs per family (default 4)")
+    ap.add_argument("--quick", action="store_true", help="1 pair per family, no CPD")
+    ap.add_argument("--trials", type=int, default=None, help="pairs per family (default 2)")
     ap.add_argument("--methods", default=None, help="comma-separated subset of "
                     + ",".join(METHODS))
     args = ap.parse_args(argv)
-    trials = args.trials or (2 if args.quick else 4)
+    trials = args.trials or (1 if args.quick else 2)
     methods = args.methods.split(",") if args.methods else (
         ["auto", "local", "global"] if args.quick else list(METHODS))
     print(f"{trials} pairs per family, {len(FAMILIES)} families\n")
