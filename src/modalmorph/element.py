@@ -10,6 +10,12 @@ The physical matrices use ``A = G^-1``: ``M = rho (I_d kron A Gamma A)`` and
 ``K_ab = A [(lambda + mu) D^ab + mu delta_ab sum_c D^cc] A``. ``A`` is never formed: the
 eigenproblem is solved in the Gaussian basis (see :mod:`modalmorph.modes`), and the dense
 ``mass``/``stiffness`` properties use triangular solves with ``G``'s Cholesky factor.
+
+Large objects: every entry above decays like ``exp(-|r|^2 / (4 sigma^2))`` and sigma is a
+multiple of the node spacing, so each node interacts with a bounded number of others. The
+sparse solver keeps only pairs closer than a cutoff radius (:attr:`FEModel.cutoff_radius`,
+set by ``cutoff``) and works with sparse ``G``, ``Gamma`` and ``K_g``; no m x m matrix is
+formed.
 """
 
 from __future__ import annotations
@@ -17,15 +23,26 @@ from __future__ import annotations
 from functools import cached_property
 
 import numpy as np
-from scipy import linalg
+from scipy import linalg, sparse
+from scipy.sparse import linalg as splinalg
+from scipy.spatial import cKDTree
 
 from .material import POLYETHYLENE, Material
 from .shape import Shape, as_shape
 
-__all__ = ["FEModel", "DEFAULT_SIGMA", "gram_entries", "stiffness_entries"]
+__all__ = ["FEModel", "DEFAULT_SIGMA", "DEFAULT_CUTOFF", "AUTO_DENSE_MAX_DOF",
+           "DENSE_MAX_DOF", "SOLVERS", "cutoff_radius", "gram_entries", "stiffness_entries"]
 
 # sigma in units of the mean nearest-neighbour spacing; chosen by measurement, see README.
 DEFAULT_SIGMA = 1.0
+# The sparse solver drops every interaction smaller than this fraction of the diagonal.
+DEFAULT_CUTOFF = 1e-10
+# solver="auto" uses the dense solver up to this many degrees of freedom (d * m): there all
+# modes take about a second (benchmarks/model.py); above it, the sparse one.
+AUTO_DENSE_MAX_DOF = 3000
+# Dense (d*m)^2 matrices are refused beyond this size (an 8 * 12000^2 = 1.2 GB array).
+DENSE_MAX_DOF = 12000
+SOLVERS = ("auto", "dense", "sparse")
 
 
 def gram_entries(r: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
@@ -56,6 +73,26 @@ def stiffness_entries(r: np.ndarray, sigma: float, lam: float, mu: float) -> np.
     return out
 
 
+def cutoff_radius(sigma: float, cutoff: float = DEFAULT_CUTOFF) -> float:
+    """Distance beyond which the sparse model drops the interaction of two nodes.
+
+    The radius ``2 sigma sqrt(x)`` where ``2 x exp(-x) = cutoff`` (``x >= 1``): beyond it,
+    every entry of ``G`` (decaying like ``exp(-2x)``), ``Gamma`` (``exp(-x)``) and ``K_g``
+    (at most ``2 x exp(-x)`` of its diagonal) is below ``cutoff`` times the diagonal.
+    ``cutoff = 1e-10`` gives ``x = 26.3``, a radius of 10.3 sigma.
+    """
+    if not 0 < cutoff < 1:
+        raise ValueError(f"cutoff must be in (0, 1), got {cutoff}")
+    target = np.log(1 / cutoff)
+    x = max(target, 1.0)
+    for _ in range(100):  # fixed point of x = log(1/cutoff) + log(2x), a contraction
+        x_new = target + np.log(2 * x)
+        if abs(x_new - x) < 1e-12 * x:
+            break
+        x = x_new
+    return float(2 * sigma * np.sqrt(x_new))
+
+
 class FEModel:
     """The physical model of one object with Sclaroff's Gaussian element.
 
@@ -73,21 +110,47 @@ class FEModel:
         The material filling the object (default: polyethylene, the paper's choice).
     plane : {"stress", "strain"}, optional
         2D idealisation: plane stress (thin sheet, the default) or plane strain.
+    solver : {"auto", "dense", "sparse"}, optional
+        How :meth:`modes` solves the eigenproblem. ``"dense"``: all interactions, dense
+        matrices, LAPACK; exact, but O(m^2) memory and O(m^3) time. ``"sparse"``:
+        interactions beyond :attr:`cutoff_radius` are dropped, the lowest ``n`` modes
+        come from a shift-invert Lanczos solver (ARPACK) on sparse matrices; about linear
+        memory in the number of pairs. ``"auto"`` (default) picks dense up to
+        ``AUTO_DENSE_MAX_DOF`` degrees of freedom (``d * m``) and sparse above.
+        The resolved choice is :attr:`solver`.
+    cutoff : float, optional
+        Sparse solver only: the relative size below which interactions are dropped (see
+        :func:`cutoff_radius`; default 1e-10, a radius of 10.3 sigma). This truncation is
+        the sparse model's only approximation: with the default, its lowest frequencies
+        agree with the dense ones to about 1e-9 relative (``tests/test_scale.py``,
+        ``benchmarks/scale.py``). A larger cutoff saves time and memory and costs
+        accuracy; since the truncated Gram matrices are no longer exactly positive
+        definite, a cutoff near the inverse condition number of ``Gamma`` fails.
 
     Raises
     ------
     ValueError
-        For an invalid shape, a non-positive sigma, or a sigma so large that the Gram
-        matrix is numerically singular for this node set.
+        For an invalid shape, a non-positive sigma, an unknown solver, or (when the modes
+        are computed) a sigma so large that the Gram matrix is numerically singular for
+        this node set.
     """
 
     def __init__(self, shape, *, sigma: float = DEFAULT_SIGMA,
-                 material: Material = POLYETHYLENE, plane: str = "stress"):
+                 material: Material = POLYETHYLENE, plane: str = "stress",
+                 solver: str = "auto", cutoff: float = DEFAULT_CUTOFF):
         self.shape: Shape = as_shape(shape)
         if not np.isfinite(sigma) or sigma <= 0:
             raise ValueError(f"sigma must be a positive finite number, got {sigma}")
         if not isinstance(material, Material):
             raise ValueError(f"material must be a Material, got {type(material).__name__}")
+        if solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
+        if not (isinstance(cutoff, int | float) and 0 < cutoff < 1):
+            raise ValueError(f"cutoff must be a number in (0, 1), got {cutoff!r}")
+        if solver == "auto":
+            solver = "dense" if self.shape.dim * self.shape.m <= AUTO_DENSE_MAX_DOF else "sparse"
+        self.solver = solver
+        self.cutoff = float(cutoff)
         self.sigma_rel = float(sigma)
         self.material = material
         self.plane = plane
@@ -117,8 +180,23 @@ class FEModel:
         """Absolute Gaussian width in the normalised frame."""
         return self.sigma_rel * self.shape.spacing
 
+    @property
+    def cutoff_radius(self) -> float:
+        """Sparse solver: pairs of nodes farther apart than this (normalised frame) do not
+        interact. See :func:`cutoff_radius`."""
+        return cutoff_radius(self.sigma, self.cutoff)
+
+    def _check_dense(self, what: str) -> None:
+        dof = self.dim * self.m
+        if dof > DENSE_MAX_DOF:
+            raise ValueError(
+                f"{what} is a dense ({dof}, {dof}) matrix, too large for this "
+                f"{self.m}-node shape (limit {DENSE_MAX_DOF} degrees of freedom); use "
+                f"modes(n), apply_mass, apply_stiffness or the sparse gram_sparse instead")
+
     @cached_property
     def _offsets(self) -> np.ndarray:
+        self._check_dense("the offset table")
         x = self.points
         return x[None, :, :] - x[:, None, :]  # r_ij = X_j - X_i
 
@@ -130,13 +208,77 @@ class FEModel:
     @cached_property
     def stiffness_gaussian(self) -> np.ndarray:
         """Dense stiffness in the Gaussian basis, ``K_g`` (dm, dm), component-major (7)."""
+        self._check_dense("K_g")
         lam, mu = self.lame
         blocks = stiffness_entries(self._offsets, self.sigma, lam, mu)  # (m, m, d, d)
         dm = self.dim * self.m
         return np.ascontiguousarray(blocks.transpose(2, 0, 3, 1).reshape(dm, dm))
 
+    # -- sparse model: pairs within the cutoff radius ----------------------------------
+
+    @cached_property
+    def pairs(self) -> np.ndarray:
+        """Pairs ``(i, j)``, ``i < j``, of nodes closer than :attr:`cutoff_radius`,
+        shape (p, 2). The sparse model's interactions (besides each node with itself)."""
+        found = cKDTree(self.points).query_pairs(self.cutoff_radius, output_type="ndarray")
+        return found.astype(_index_dtype(self.dim * self.m), copy=False)
+
+    @cached_property
+    def gram_sparse(self) -> tuple[sparse.csr_array, sparse.csr_array]:
+        """Sparse ``(G, Gamma)``, each (m, m) CSR, truncated at :attr:`cutoff_radius`."""
+        m, (i, j) = self.m, self.pairs.T
+        g, gamma = gram_entries(self.points[j] - self.points[i], self.sigma)
+        g0, gamma0 = gram_entries(np.zeros((1, self.dim)), self.sigma)
+        diag = np.arange(m, dtype=i.dtype)
+        rows, cols = np.r_[i, j, diag], np.r_[j, i, diag]
+
+        def build(off, on):
+            data = np.r_[off, off, np.full(m, on[0])]
+            return sparse.csr_array((data, (rows, cols)), shape=(m, m))
+
+        return build(g, g0), build(gamma, gamma0)
+
+    @cached_property
+    def stiffness_gaussian_sparse(self) -> sparse.csr_array:
+        """Sparse ``K_g`` (dm, dm) CSR, component-major (7), truncated at
+        :attr:`cutoff_radius`; assembled from the pair list in chunks."""
+        d, m = self.dim, self.m
+        lam, mu = self.lame
+        pairs, x = self.pairs, self.points
+        p = len(pairs)
+        itype = pairs.dtype
+        nnz_block = 2 * p + m
+        data = np.empty((d, d, nnz_block))
+        rows = np.empty(nnz_block, dtype=itype)
+        cols = np.empty(nnz_block, dtype=itype)
+        data[:, :, 2 * p:] = stiffness_entries(np.zeros((1, d)), self.sigma, lam, mu)[0][
+            :, :, None]
+        rows[2 * p:] = cols[2 * p:] = np.arange(m, dtype=itype)
+        chunk = 1 << 20
+        for start in range(0, p, chunk):
+            i, j = pairs[start:start + chunk].T
+            blocks = stiffness_entries(x[j] - x[i], self.sigma, lam, mu)  # (c, d, d)
+            stop = start + len(i)
+            # K_g^ab_ij = K_g^ab_ji: the blocks are even in r and symmetric in (a, b)
+            data[:, :, start:stop] = data[:, :, p + start:p + stop] = blocks.transpose(1, 2, 0)
+            rows[start:stop], cols[start:stop] = i, j
+            rows[p + start:p + stop], cols[p + start:p + stop] = j, i
+        offsets = (np.arange(d, dtype=itype) * itype.type(m))
+        all_rows = (offsets[:, None, None] + rows).repeat(d, axis=1).reshape(-1)
+        all_cols = np.broadcast_to(offsets[None, :, None] + cols, (d, d, nnz_block)).reshape(-1)
+        return sparse.csr_array((data.reshape(-1), (all_rows, all_cols)), shape=(d * m, d * m))
+
+    # -- products with M, K and A = G^-1 -----------------------------------------------
+
     @cached_property
     def _g_factor(self):
+        if self.solver == "sparse":
+            try:
+                return splinalg.splu(self.gram_sparse[0].tocsc(), permc_spec="MMD_AT_PLUS_A",
+                                     diag_pivot_thresh=0.0,
+                                     options={"SymmetricMode": True})
+            except RuntimeError:  # "Factor is exactly singular"
+                raise ValueError(_breakdown_message(self)) from None
         G = self.gram[0]
         try:
             return linalg.cho_factor(G, lower=True, check_finite=False)
@@ -144,49 +286,120 @@ class FEModel:
             raise ValueError(_breakdown_message(self)) from None
 
     def solve_gram(self, B: np.ndarray) -> np.ndarray:
-        """``(I_d kron A) B`` for B of shape (dm, k) or (dm,), by solves with G's factor."""
+        """``(I_d kron A) B`` for B of shape (dm, k) or (dm,), by solves with G's factor
+        (Cholesky for the dense solver, sparse LU of the truncated ``G`` for the sparse one).
+        """
         d, m = self.dim, self.m
-        flat = np.asarray(B).reshape(d, m, -1).transpose(1, 0, 2).reshape(m, -1)
-        X = linalg.cho_solve(self._g_factor, flat, check_finite=False)
+        flat = np.asarray(B, dtype=np.float64).reshape(d, m, -1).transpose(1, 0, 2)
+        flat = flat.reshape(m, -1)
+        if self.solver == "sparse":
+            X = self._g_factor.solve(np.asfortranarray(flat))
+        else:
+            X = linalg.cho_solve(self._g_factor, flat, check_finite=False)
         return X.reshape(m, d, -1).transpose(1, 0, 2).reshape(np.shape(B))
 
-    def _sandwich(self, B: np.ndarray) -> np.ndarray:
-        """``(I kron A) B (I kron A)`` for a symmetric (dm, dm) matrix."""
-        out = self.solve_gram(self.solve_gram(B).T)
-        return (out + out.T) / 2
+    def _apply_gaussian(self, which: str, B: np.ndarray) -> np.ndarray:
+        """``M_g B`` (without rho) or ``K_g B`` for B (dm, k) or (dm,)."""
+        d, m = self.dim, self.m
+        B = np.asarray(B, dtype=np.float64)
+        if which == "mass":
+            Gamma = self.gram_sparse[1] if self.solver == "sparse" else self.gram[1]
+            out = np.stack([Gamma @ b for b in B.reshape(d, m, -1)])
+            return out.reshape(B.shape)
+        Kg = self.stiffness_gaussian_sparse if self.solver == "sparse" else \
+            self.stiffness_gaussian
+        return Kg @ B
+
+    def apply_mass(self, U: np.ndarray) -> np.ndarray:
+        """``M U`` for U (dm,) or (dm, k), without forming M: ``(I kron A) M_g (I kron A) U``.
+
+        With the sparse solver, this is the truncated model's mass (the one its modes are
+        orthonormal in). For mode shapes, ``M Phi = (I kron A) M_g psi`` needs one solve:
+        ``model.solve_gram(rho * Gamma psi)``, see :meth:`mass_times_modes`.
+        """
+        return self.material.rho * self.solve_gram(self._apply_gaussian("mass",
+                                                                         self.solve_gram(U)))
+
+    def apply_stiffness(self, U: np.ndarray) -> np.ndarray:
+        """``K U`` for U (dm,) or (dm, k), without forming K: ``(I kron A) K_g (I kron A) U``."""
+        return self.solve_gram(self._apply_gaussian("stiffness", self.solve_gram(U)))
+
+    def mass_times_modes(self, modes) -> np.ndarray:
+        """``M Phi`` (dm, n) for modes of this model, by one solve with G (method.md §1
+        "cheap products"): ``M Phi = (I kron A) rho (I kron Gamma) psi``. Then
+        ``K Phi = M Phi diag(omega^2)``."""
+        return self.solve_gram(self.material.rho * self._apply_gaussian("mass",
+                                                                         modes.gaussian))
 
     @property
     def mass(self) -> np.ndarray:
         """Dense mass matrix ``M = rho (I_d kron A Gamma A)``, (dm, dm), component-major."""
-        Mg = self.material.rho * np.kron(np.eye(self.dim), self.gram[1])
-        return self._sandwich(Mg)
+        self._check_dense("M")
+        G_fac, Gamma = self._dense_g_factor, self.gram[1]
+        AGA = linalg.cho_solve(G_fac, linalg.cho_solve(G_fac, Gamma, check_finite=False).T,
+                               check_finite=False)
+        AGA = (AGA + AGA.T) * (self.material.rho / 2)
+        return np.kron(np.eye(self.dim), AGA)
 
     @property
     def stiffness(self) -> np.ndarray:
         """Dense stiffness matrix ``K = (I kron A) K_g (I kron A)``, (dm, dm)."""
-        return self._sandwich(self.stiffness_gaussian)
+        self._check_dense("K")
+        d, m = self.dim, self.m
+        G_fac = self._dense_g_factor
+        # each block K_ab = A K_g^ab A: solve on the rows, then on the columns
+        Kg = self.stiffness_gaussian.reshape(d, m, d * m).transpose(1, 0, 2).reshape(m, -1)
+        X = linalg.cho_solve(G_fac, Kg, check_finite=False).reshape(m, d, d, m)
+        X = X.transpose(3, 0, 1, 2).reshape(m, -1)  # columns of each block to the front
+        Y = linalg.cho_solve(G_fac, X, check_finite=False).reshape(m, m, d, d)
+        K = Y.transpose(2, 1, 3, 0).reshape(d * m, d * m)
+        return (K + K.T) / 2
+
+    @cached_property
+    def _dense_g_factor(self):
+        if self.solver == "dense":
+            return self._g_factor
+        try:
+            return linalg.cho_factor(self.gram[0], lower=True, check_finite=False)
+        except linalg.LinAlgError:
+            raise ValueError(_breakdown_message(self)) from None
 
     def modes(self, n: int | None = None):
         """The lowest ``n`` modes (all when ``None``) of ``K Phi = M Phi Omega^2`` (6).
+
+        With the sparse solver ``n`` is required and must be below ``d * m - 1``.
 
         Returns
         -------
         Modes
             Frequencies ascending and mass-normalised mode shapes.
         """
-        from .modes import solve_modes
+        from .modes import solve_modes, solve_modes_sparse
 
         total = self.dim * self.m
+        if n is None and self.solver == "sparse":
+            raise ValueError(
+                f"the sparse solver computes the lowest n modes: pass n (e.g. modes(50)), "
+                f"or use FEModel(..., solver='dense') for all {total} modes of this "
+                f"{self.m}-node shape")
         n = total if n is None else int(n)
         if not 1 <= n <= total:
             raise ValueError(f"n must be between 1 and {total} (d * m), got {n}")
+        if self.solver == "sparse" and n >= total - 1:
+            raise ValueError(f"the sparse solver computes at most {total - 2} modes of this "
+                             f"{self.m}-node shape, got n={n}; use solver='dense'")
         if n not in self._modes:
-            self._modes[n] = solve_modes(self, n)
+            solve = solve_modes_sparse if self.solver == "sparse" else solve_modes
+            self._modes[n] = solve(self, n)
         return self._modes[n]
 
     def __repr__(self) -> str:
         return (f"FEModel(m={self.m}, d={self.dim}, sigma={self.sigma_rel:g}, "
-                f"material={self.material.name})")
+                f"material={self.material.name}, solver={self.solver!r})")
+
+
+def _index_dtype(size: int):
+    return np.dtype(np.int32) if size < np.iinfo(np.int32).max else np.dtype(np.intp)
 
 
 def _breakdown_message(model: FEModel, cond: float | None = None) -> str:

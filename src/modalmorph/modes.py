@@ -5,9 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import linalg
+from scipy import linalg, sparse
+from scipy.sparse import linalg as splinalg
 
-__all__ = ["Modes", "solve_modes", "rayleigh", "MAX_CONDITION"]
+__all__ = ["Modes", "solve_modes", "solve_modes_sparse", "rayleigh", "MAX_CONDITION"]
 
 # Beyond this condition number of Gamma the mass-normalisation loses more than ~4 of its
 # 16 digits (Phi^T M Phi = I is then only good to ~1e-4): refuse instead of returning noise.
@@ -62,30 +63,177 @@ def solve_modes(model, n: int) -> Modes:
     from .element import _breakdown_message
 
     d, m = model.dim, model.m
-    Gamma = model.gram[1]
+    G, Gamma = model.gram
     lam_g, Q = linalg.eigh(Gamma, check_finite=False)
     cond = lam_g[-1] / lam_g[0] if lam_g[0] > 0 else np.inf
     if not cond < MAX_CONDITION:
         raise ValueError(_breakdown_message(model, cond))
     W = Q / np.sqrt(lam_g)  # W^T Gamma W = I
-    Kg = model.stiffness_gaussian.reshape(d, m, d, m)
-    # whitened stiffness: (I kron W)^T K_g (I kron W), block by block
-    Kw = np.einsum("ip,aibj,jq->apbq", W, Kg, W, optimize=True).reshape(d * m, d * m)
+    # whitened stiffness (I kron W)^T K_g (I kron W): two GEMMs on the (d, m, d, m) blocks
+    Kw = model.stiffness_gaussian.reshape(d, m, d, m) @ W  # right factor, one GEMM
+    Kw = np.matmul(W.T, Kw.reshape(d, m, d * m)).reshape(d * m, d * m)  # left, per block row
     Kw = (Kw + Kw.T) / 2
-    subset = None if n == d * m else (0, n - 1)
-    w2, Y = linalg.eigh(Kw, subset_by_index=subset, check_finite=False,
-                        driver="evr" if subset else "evd")
-    psi = (W @ Y.reshape(d, m, n).transpose(1, 0, 2).reshape(m, -1))  # (I kron W) Y
-    psi = psi.reshape(m, d, n).transpose(1, 0, 2).reshape(d * m, n) / np.sqrt(model.material.rho)
-    phi = _apply_blockwise(model.gram[0], psi, d)  # Phi = (I kron G) psi
+    w2, Y = _eigh_lowest(Kw, n)
+    psi = np.matmul(W, Y.reshape(d, m, n)) / np.sqrt(model.material.rho)  # (I kron W) Y
+    phi = np.matmul(G, psi)  # Phi = (I kron G) psi
     w2 = w2 / model.material.rho
+    return Modes(frequencies=np.sqrt(np.clip(w2, 0.0, None)), shapes=phi.reshape(d * m, n),
+                 gaussian=psi.reshape(d * m, n), dim=d)
+
+
+# Below this fraction of the spectrum, LAPACK's MRRR with an index range (evr) beats the
+# divide-and-conquer solver (evd), which always computes every eigenvector
+# (benchmarks/model.py, measured at 500 and 2000 degrees of freedom).
+_SUBSET_FRACTION = 0.2
+
+
+def _eigh_lowest(A: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``n`` smallest eigenpairs of the symmetric matrix ``A``, ascending."""
+    N = A.shape[0]
+    if n <= _SUBSET_FRACTION * N:
+        return linalg.eigh(A, subset_by_index=(0, n - 1), driver="evr", check_finite=False,
+                           overwrite_a=True)
+    w, V = linalg.eigh(A, driver="evd", check_finite=False, overwrite_a=True)
+    return w[:n], V[:, :n]
+
+
+# Sparse solver: relative residual ||K_g psi - w^2 M_g psi|| / (||K_g|| ||psi||) above
+# which a computed mode is rejected (ARPACK converges to ~1e-14 when the problem is sane).
+SPARSE_RESIDUAL_TOL = 1e-8
+
+
+def solve_modes_sparse(model, n: int) -> Modes:
+    """The lowest ``n`` modes of the truncated (sparse) model, by shift-invert Lanczos.
+
+    ``K_g psi = w^2 M_g psi`` with sparse ``K_g`` and ``M_g = rho (I kron Gamma)``
+    truncated at ``model.cutoff_radius``. With a shift ``s`` just below the lowest
+    eigenvalue (found by a few steps of inverse iteration, checked by Sylvester's inertia),
+    ``K_g - s M_g`` is positive definite; it is factorised (SuperLU, symmetric mode) and
+    ARPACK finds the eigenvalues of ``(K_g - s M_g)^-1 M_g`` of largest magnitude, i.e.
+    the lowest ``w^2``. A final
+    Rayleigh-Ritz step in the computed subspace makes ``psi^T M_g psi = I`` exact to
+    round-off. No dense m x m matrix is formed.
+
+    Ill-conditioning (sigma too large for the node set, or a cutoff too coarse for
+    Gamma's condition) is detected by the condition number of the truncated Gamma
+    (estimated with two Lanczos runs), a failed factorisation, or large residuals, and
+    refused with a ValueError.
+    """
+    from .element import _breakdown_message
+
+    d, m = model.dim, model.m
+    rho = model.material.rho
+    G, Gamma = model.gram_sparse
+    Kg = model.stiffness_gaussian_sparse
+
+    cond = _condition_spd(Gamma)
+    if not cond < MAX_CONDITION:
+        raise ValueError(_breakdown_message(model, cond))
+
+    Mg = sparse.block_diag([Gamma] * d, format="csr")
+    lu, shift = _shifted_factor(Kg, Mg, model)
+    OPinv = splinalg.LinearOperator(Kg.shape, matvec=lu.solve, dtype=np.float64)
+    v0 = np.random.default_rng(0).standard_normal(d * m)  # same inputs, same outputs
+    w2, psi = splinalg.eigsh(Kg, k=n, M=Mg, sigma=shift, which="LM", OPinv=OPinv, v0=v0,
+                             ncv=min(d * m, max(2 * n + 1, 20)))
+    # Rayleigh-Ritz in the computed subspace: exact M_g-orthonormality, sorted values
+    MgPsi = Mg @ psi
+    KgPsi = Kg @ psi
+    Mr, Kr = psi.T @ MgPsi, psi.T @ KgPsi
+    w2, R = linalg.eigh((Kr + Kr.T) / 2, (Mr + Mr.T) / 2, check_finite=False)
+    psi, MgPsi, KgPsi = psi @ R, MgPsi @ R, KgPsi @ R
+    residual = np.linalg.norm(KgPsi - MgPsi * w2, axis=0)
+    k_norm = splinalg.norm(Kg, 1)
+    if not np.all(residual <= SPARSE_RESIDUAL_TOL * k_norm * np.linalg.norm(psi, axis=0)):
+        raise ValueError(_breakdown_message(model) + " (sparse eigensolver residuals "
+                         f"{residual.max() / k_norm:.1e})")
+    psi = psi / np.sqrt(rho)  # psi^T (rho M_g) psi = I
+    phi = np.stack([G @ p for p in psi.reshape(d, m, n)]).reshape(d * m, n)
+    w2 = w2 / rho
     return Modes(frequencies=np.sqrt(np.clip(w2, 0.0, None)), shapes=phi, gaussian=psi, dim=d)
 
 
-def _apply_blockwise(B: np.ndarray, X: np.ndarray, d: int) -> np.ndarray:
-    """``(I_d kron B) X`` for B (m, m) and X (d*m, n)."""
-    m = B.shape[0]
-    return np.einsum("ij,ajn->ain", B, X.reshape(d, m, -1)).reshape(X.shape)
+def _spd_factor(A):
+    """Sparse LU of a symmetric matrix with a symmetric ordering and no pivoting
+    (SuperLU's symmetric mode): ``P A P^T = L D L^T`` with ``D = diag(U)``."""
+    return splinalg.splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                         options={"SymmetricMode": True})
+
+
+def _negative_pivots(lu) -> int | None:
+    """Eigenvalues below 0 of the factorised matrix (Sylvester's inertia), or None when
+    the factorisation pivoted and the count cannot be read from it."""
+    if not np.array_equal(lu.perm_r, lu.perm_c):
+        return None
+    return int(np.count_nonzero(lu.U.diagonal() < 0))
+
+
+# Shift-invert Lanczos converges fast only when the shift lies close below the lowest
+# eigenvalue: the low spectrum of the Gaussian element is a tight cluster (the lowest 50
+# frequencies of a 16000-node contour lie within 0.3%), and a shift at 0 maps it to nearly
+# equal values; 60 s against 1.5 s for a shift 1% below (measured, benchmarks/scale.py).
+_SHIFT_MARGIN = 0.01
+_ESTIMATE_BLOCK, _ESTIMATE_STEPS = 8, 8
+
+
+def _shifted_factor(Kg, Mg, model):
+    """Factor ``K_g - s M_g`` for a shift ``s`` a little below the lowest eigenvalue.
+
+    A few steps of block inverse iteration (with the factor at ``s ~ 0``) and a Rayleigh-
+    Ritz step give an upper bound ``l1 >= w^2_1``; ``s = (1 - 0.01) l1`` is then checked by
+    the inertia of its factor (no negative pivot means ``s < w^2_1``) and lowered if needed.
+    """
+    from .element import _breakdown_message
+
+    scale = float(np.mean(Kg.diagonal()) / np.mean(Mg.diagonal()))  # upper spectrum
+    base = -1e-6 * scale  # K_g is positive semi-definite: K_g - base M_g is SPD
+    try:
+        lu0 = _spd_factor(Kg - base * Mg)
+    except RuntimeError:  # "Factor is exactly singular"
+        raise ValueError(_breakdown_message(model)) from None
+    if _negative_pivots(lu0):
+        raise ValueError(_breakdown_message(model) + " (the truncated M_g or K_g is "
+                         "indefinite; use a smaller cutoff)")
+    N = Kg.shape[0]
+    b = min(_ESTIMATE_BLOCK, N)
+    X = np.random.default_rng(1).standard_normal((N, b))
+    for _ in range(_ESTIMATE_STEPS):  # inverse iteration on the block
+        X, _ = np.linalg.qr(lu0.solve(np.asfortranarray(Mg @ X)))
+    Kr, Mr = X.T @ (Kg @ X), X.T @ (Mg @ X)
+    l1 = float(linalg.eigh((Kr + Kr.T) / 2, (Mr + Mr.T) / 2, eigvals_only=True,
+                           check_finite=False)[0])
+    if not l1 > base:
+        return lu0, base
+    shift = l1 * (1 - _SHIFT_MARGIN)
+    for _ in range(3):
+        try:
+            lu = _spd_factor(Kg - shift * Mg)
+        except RuntimeError:
+            lu = None
+        if lu is not None and _negative_pivots(lu) == 0:
+            return lu, shift
+        shift = l1 - 4 * (l1 - shift)  # below w^2_1 after all? step further down
+        if shift <= base:
+            break
+    return lu0, base
+
+
+def _condition_spd(A: sparse.csr_array) -> float:
+    """2-norm condition number of a sparse symmetric positive definite matrix (Lanczos on
+    A for the largest eigenvalue, and on A^-1, by sparse LU, for the smallest)."""
+    v0 = np.random.default_rng(0).standard_normal(A.shape[0])
+    top = splinalg.eigsh(A, k=1, which="LA", v0=v0, tol=1e-3, return_eigenvectors=False)[0]
+    try:
+        lu = _spd_factor(A)
+    except RuntimeError:
+        return np.inf
+    inv = splinalg.LinearOperator(A.shape, matvec=lu.solve, dtype=np.float64)
+    # the inverse's spectrum: its largest magnitude eigenvalue is 1 / lambda_min (or
+    # negative when truncation broke positive definiteness)
+    low = splinalg.eigsh(inv, k=1, which="LM", v0=v0, tol=1e-3, return_eigenvectors=False)[0]
+    if not low > 0:
+        return np.inf
+    return float(top * low)
 
 
 def rayleigh(xi1: float, xi2: float, w1: float, w2: float) -> tuple[float, float]:
