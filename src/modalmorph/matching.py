@@ -31,7 +31,7 @@ from scipy.spatial import cKDTree
 
 from .align import Similarity, align
 from .element import FEModel, gram_entries
-from .shape import Shape, as_shape
+from .shape import Shape, as_shape, resample
 
 __all__ = ["Matching", "match", "modal_features", "affinity", "METHODS"]
 
@@ -144,14 +144,21 @@ def modal_features(shape, n_modes: int, *, sigma: float = DEFAULT_SIGMA,
     frequencies : ndarray, shape (n_modes,)
     """
     shape = as_shape(shape)
-    subset = _model_subset(shape, max_nodes)
-    model_shape = shape if len(subset) == shape.m else Shape(
-        shape.points[subset], closed=shape.closed, ordered=shape.ordered)
+    if shape.ordered:
+        # contours: model an arc-length-uniform resampling, so that sigma (a multiple of the
+        # mean spacing) is well conditioned whatever the input's sampling, and the modes
+        # do not depend on how densely either contour was traced
+        model_shape = Shape(resample(shape.points, min(shape.m, max_nodes),
+                                     closed=shape.closed), closed=shape.closed)
+    else:
+        subset = _model_subset(shape, max_nodes)
+        model_shape = shape if len(subset) == shape.m else Shape(
+            shape.points[subset], closed=shape.closed, ordered=shape.ordered)
     model = FEModel(model_shape, sigma=sigma)
     n_modes = min(int(n_modes), model.dim * model.m)
     modes = model.modes(n_modes)
     d = shape.dim
-    if len(subset) == shape.m:
+    if model_shape is shape:
         phi = modes.node_shapes()
     else:
         x = model_shape.to_normalized(shape.points)
