@@ -13,11 +13,15 @@ from .element import DEFAULT_SIGMA, FEModel
 from .energy import node_energy, strain_energy
 from .material import POLYETHYLENE, Material
 from .modes import rayleigh
-from .shape import Shape, as_shape
+from .shape import Shape, as_shape, coarsen
 
 __all__ = ["Morph", "MorphDivergedError", "morph"]
 
 log = logging.getLogger(__name__)
+
+# Modes superposed by default for large objects (sparse solver), where all modes would
+# need a dense eigenproblem: the lowest ones carry the smooth part of the deformation.
+SPARSE_MODES = 100
 
 
 class MorphDivergedError(ArithmeticError):
@@ -85,7 +89,8 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
           dt: float = 0.1, alpha: float = 0.25, delta: float = 0.5,
           damping: tuple[float, float] = (2.0, 2.0), c_x: float = 0.0, c_v: float = 0.0,
           material: Material = POLYETHYLENE, sigma: float = DEFAULT_SIGMA,
-          modes: int | float | None = None, scheme: str = "implicit", tol: float = 0.005,
+          modes: int | float | None = None, solver: str = "auto", model_nodes: int = 300,
+          scheme: str = "implicit", tol: float = 0.005,
           tol_distance: float | None = None, max_steps: int = 100,
           equilibrium_tol: float = 1e-7, neighbours: int = 6,
           progress: Callable[[int, float], None] | None = None) -> Morph:
@@ -134,7 +139,16 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
     modes : int, float or None, optional
         Modes used in the superposition: all (``None``), a count, or a fraction in (0, 1]
         of all modes (the paper compares all with 2/3). Fewer modes: cheaper steps, a less
-        exact final shape.
+        exact final shape. With the sparse solver ``None`` means the lowest 100.
+    model_nodes : int, optional
+        Largest physical model built. A source with more nodes is modelled on this many
+        nodes spread evenly over it (by arc length for contours), and every node moves with
+        the element's displacement field ``u(x) = sum_k h_k(x) U_k`` (3)-(4); its load
+        enters through the same field (consistent nodal loads), and the local energy is
+        spread from the model nodes over the nodes around them.
+    solver : {"auto", "dense", "sparse"}, optional
+        Eigensolver of the model (see :class:`FEModel`): ``"auto"`` uses the exact dense
+        one for small objects and the truncated sparse one for large objects.
     scheme : {"implicit", "explicit"}, optional
         Where the loads are evaluated. ``"implicit"``: at the new shape (the spring enters
         the effective stiffness; unconditionally stable). ``"explicit"``: at the previous
@@ -171,7 +185,8 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
         raise ValueError(f"source and target must have the same dimension, got "
                          f"{src.dim}D and {tgt.dim}D")
     _check_options(k=k, dt=dt, damping=damping, scheme=scheme, tol=tol,
-                   tol_distance=tol_distance, max_steps=max_steps, neighbours=neighbours)
+                   tol_distance=tol_distance, max_steps=max_steps, neighbours=neighbours,
+                   model_nodes=model_nodes)
     check_newmark(alpha, delta)
     if matching is None:
         from .matching import match
@@ -187,14 +202,16 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
         similarity = align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]], scale=True)
         work = src.with_points(similarity.apply(src.points))
 
-    model = FEModel(work, sigma=sigma, material=material)
-    n_modes = _mode_count(modes, model.dim * model.m)
+    # The physical model: the source itself, or a coarser copy when it has more nodes
+    # than model_nodes; every node then moves with the element's displacement field.
+    reduced = coarsen(work, model_nodes)
+    model = FEModel(reduced, sigma=sigma, material=material, solver=solver)
+    n_modes = _mode_count(modes, model.dim * model.m, sparse=model.solver == "sparse")
     md = model.modes(n_modes)
-    d, m = model.dim, model.m
-    Phi, w2 = md.shapes, md.eigenvalues
+    d, m = work.dim, work.m
+    w2 = md.eigenvalues
     rho = material.rho
-    # M Phi = (I kron A) M_g psi: the "cheap product" of method.md §1
-    MPhi = model.solve_gram(rho * _kron_apply(model.gram[1], md.gaussian, d))
+    MPhi = model.mass_times_modes(md)  # M Phi = (I kron A) M_g psi (method.md §1)
 
     # Reference scales: the stiffness and mass of one node in the Gaussian basis.
     lam, mu = model.lame
@@ -202,10 +219,18 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
     k_ref = V / model.sigma**2 * ((lam + mu) / 2 + mu * d / 2)
     m_ref = rho * V
     w_ref = np.sqrt(k_ref / m_ref)
-    k_abs, dt_abs = k * k_ref, dt / w_ref
+    # one spring per node; with a reduced model their total stiffness is kept the same
+    k_abs, dt_abs = k * k_ref * model.m / m, dt / w_ref
 
-    X1 = np.asarray(work.normalized)
-    Y = work.to_normalized(tgt.points)
+    X1 = reduced.to_normalized(work.points)  # everything in the model's normalised frame
+    Y = reduced.to_normalized(tgt.points)
+    if reduced is work:
+        Phi, spread = md.shapes, None
+    else:  # modes at every node: u(x) = sum_k g_k(x) psi_k (1)-(4), truncated like G
+        g_eval = _field_matrix(X1, model)
+        Phi = (g_eval @ md.gaussian.reshape(d, model.m, -1).transpose(1, 0, 2)
+               .reshape(model.m, -1)).reshape(m, d, -1).transpose(1, 0, 2).reshape(d * m, -1)
+        spread = g_eval / g_eval.sum(axis=0)  # each model node's energy over the nodes
     loads_rule = LoadTargets(X1, Y, pairs, ordered=bool(work.ordered), closed=work.closed,
                              target_closed=tgt.closed, neighbours=neighbours)
 
@@ -222,22 +247,23 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
     def nodes(u):  # (d*m,) -> (m, d)
         return u.reshape(d, m).T
 
-    size = work.size
+    size = reduced.size
     tol_n = (tol_distance / size) if tol_distance is not None else tol * tgt.size / size
     shapes, loads, energy, e_node, dist = [], [], [], [], []
 
     def record(x, current, targets):
-        U = Phi @ x
-        shapes.append(work.to_user(current))
+        shapes.append(reduced.to_user(current))
         loads.append(k * (targets - current) * size)  # (19)-(20), user length units x k
         energy.append(strain_energy(x, w2) / k_ref)  # (22)
-        e_node.append(node_energy(U, MPhi @ (w2 * x), d) / k_ref)  # (25)
+        e = node_energy(md.shapes @ x, MPhi @ (w2 * x), d) / k_ref  # (25), model nodes
+        e_node.append(e if spread is None else spread @ e)
         dist.append(_mean_distance(current, Y, pairs))
 
     # t = 0: the source, and the initial state (17), (18), (21)
     T0 = loads_rule.targets(X1)
     U0 = c_x * flat(T0 - X1)  # (21): U0 = (c_x / k) R0
-    x = MPhi.T @ U0  # X0 = Phi^T M U0
+    # X0 = Phi^T M U0; with a reduced model, the least-squares fit of the field to U0
+    x = MPhi.T @ U0 if spread is None else np.linalg.lstsq(Phi, U0, rcond=None)[0]
     v = c_v * x  # (18)
     f_const = k_abs * (Phi.T @ flat(T0 - X1))
     f = f_const - (0.0 if scheme == "implicit" else k_abs * (Phi.T @ U0))
@@ -284,7 +310,8 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
     params = dict(remove_rigid=remove_rigid, k=k, dt=dt, alpha=alpha, delta=delta,
                   damping=list(damping), c_x=c_x, c_v=c_v, material=material.name,
                   E=material.E, nu=material.nu, rho=material.rho, sigma=sigma,
-                  modes=n_modes, scheme=scheme, tol=tol, tol_distance=tol_distance,
+                  modes=n_modes, model_nodes=model.m, solver=model.solver, scheme=scheme,
+                  tol=tol, tol_distance=tol_distance,
                   max_steps=max_steps, equilibrium_tol=equilibrium_tol,
                   neighbours=neighbours)
     return Morph(shapes=np.array(shapes), loads=np.array(loads), energy=np.array(energy),
@@ -293,9 +320,23 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
                  stop_reason=stop, source=src, target=tgt, params=params)
 
 
-def _kron_apply(B, X, d):
-    m = B.shape[0]
-    return np.einsum("ij,ajn->ain", B, X.reshape(d, m, -1)).reshape(X.shape)
+def _field_matrix(points, model):
+    """``g_k(x_p)`` (2) for every point and model node, as a sparse (p, m) matrix: entries
+    beyond the model's cutoff radius are dropped like those of its Gram matrices."""
+    from scipy import sparse
+    from scipy.spatial import cKDTree
+
+    from .element import cutoff_radius
+
+    radius = cutoff_radius(model.sigma, model.cutoff)
+    dist = cKDTree(points).sparse_distance_matrix(cKDTree(model.points), radius,
+                                                  output_type="coo_matrix")
+    g = sparse.csr_array((np.exp(-dist.data**2 / (2 * model.sigma**2)),
+                          (dist.row, dist.col)), shape=(len(points), model.m))
+    if np.any(g.sum(axis=1) == 0):
+        raise ValueError("a node lies farther than the cutoff radius from every model node: "
+                         "raise model_nodes or sigma")
+    return g
 
 
 def _frequency_range(K_mod):
@@ -325,10 +366,11 @@ def _pairs(matching, m, n):
     return pairs.astype(np.intp)
 
 
-def _mode_count(modes, total):
-    """``None``: all modes; an int: a count; a float: a fraction of all modes."""
+def _mode_count(modes, total, *, sparse):
+    """``None``: all modes (the lowest SPARSE_MODES with the sparse solver); an int: a
+    count; a float: a fraction of all modes."""
     if modes is None:
-        return total
+        return min(SPARSE_MODES, total - 2) if sparse else total
     if isinstance(modes, float | np.floating):
         if not 0 < modes <= 1:
             raise ValueError(f"modes as a fraction must be in (0, 1], got {modes}")
@@ -339,7 +381,8 @@ def _mode_count(modes, total):
     return int(modes)
 
 
-def _check_options(*, k, dt, damping, scheme, tol, tol_distance, max_steps, neighbours):
+def _check_options(*, k, dt, damping, scheme, tol, tol_distance, max_steps, neighbours,
+                   model_nodes):
     if not np.isfinite(k) or k <= 0:
         raise ValueError(f"k must be a positive number, got {k}")
     if not np.isfinite(dt) or dt <= 0:
@@ -356,3 +399,5 @@ def _check_options(*, k, dt, damping, scheme, tol, tol_distance, max_steps, neig
         raise ValueError(f"max_steps must be a positive integer, got {max_steps}")
     if int(neighbours) != neighbours or neighbours < 1:
         raise ValueError(f"neighbours must be a positive integer, got {neighbours}")
+    if int(model_nodes) != model_nodes or model_nodes < 3:
+        raise ValueError(f"model_nodes must be an integer >= 3, got {model_nodes}")

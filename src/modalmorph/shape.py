@@ -8,7 +8,7 @@ from functools import cached_property
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["Shape", "as_shape", "resample"]
+__all__ = ["Shape", "as_shape", "coarsen", "resample"]
 
 # Two nodes closer than this fraction of the object's RMS radius are "the same node".
 _REPEAT_TOL = 1e-9
@@ -176,3 +176,25 @@ def resample(points, n: int, *, closed: bool = True) -> np.ndarray:
     s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))]
     t = np.linspace(0.0, s[-1], n, endpoint=not closed)
     return np.column_stack([np.interp(t, s, path[:, a]) for a in range(pts.shape[1])])
+
+
+def coarsen(shape: Shape, n: int) -> Shape:
+    """At most ``n`` nodes spread evenly over a shape, for a reduced physical model.
+
+    Ordered contours are resampled by arc length (:func:`resample`); unordered point sets
+    and surfaces keep a subset of their nodes chosen by farthest-point sampling from the
+    node nearest the centroid (deterministic). A shape with at most ``n`` nodes is
+    returned as it is.
+    """
+    if shape.m <= n:
+        return shape
+    if shape.ordered:
+        return Shape(resample(shape.points, n, closed=shape.closed), closed=shape.closed)
+    x = shape.normalized
+    chosen = np.empty(n, dtype=np.intp)
+    chosen[0] = np.argmin(np.sum(x**2, axis=1))
+    dist = np.sum((x - x[chosen[0]]) ** 2, axis=1)
+    for i in range(1, n):
+        chosen[i] = np.argmax(dist)
+        dist = np.minimum(dist, np.sum((x - x[chosen[i]]) ** 2, axis=1))
+    return Shape(shape.points[np.sort(chosen)], ordered=False)
