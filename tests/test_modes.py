@@ -100,3 +100,12 @@ def test_rayleigh_rejects_bad_input():
         rayleigh(0.01, 0.01, 3.0, 3.0)
     with pytest.raises(ValueError, match="damping ratios must be >= 0"):
         rayleigh(-0.01, 0.01, 1.0, 3.0)
+
+
+@pytest.mark.parametrize("n", [5, 150, 399])
+def test_subset_sizes(hand200, n):
+    """Both eigensolver routes (index subset below 20% of the spectrum, all modes sliced
+    above) return the lowest n, mass-normalised."""
+    model = FEModel(hand200)
+    low = _check_modes(model, n)
+    assert_allclose(low.frequencies, model.modes().frequencies[:n], rtol=1e-9)
