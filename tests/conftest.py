@@ -37,6 +37,15 @@ def sphere_points(n, rng, *, radii=(1.0, 1.0, 1.0)):
     return p * np.asarray(radii) + 0.01 * rng.standard_normal((n, 3))
 
 
+def random_rotation(d, rng):
+    """A uniformly random proper rotation (det +1) of R^d."""
+    q, r = np.linalg.qr(rng.standard_normal((d, d)))
+    q = q * np.sign(np.diag(r))
+    if np.linalg.det(q) < 0:
+        q[:, 0] = -q[:, 0]
+    return q
+
+
 def self_intersections(points, *, closed=True):
     """Number of pairs of non-adjacent polyline segments that properly cross."""
     p = np.asarray(points)

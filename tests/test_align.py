@@ -6,22 +6,14 @@ from numpy.testing import assert_allclose
 
 from modalmorph.align import Similarity, align
 
-from .conftest import sphere_points
-
-
-def _rotation(d, rng):
-    q, r = np.linalg.qr(rng.standard_normal((d, d)))
-    q = q * np.sign(np.diag(r))
-    if np.linalg.det(q) < 0:
-        q[:, 0] = -q[:, 0]
-    return q
+from .conftest import random_rotation, sphere_points
 
 
 @pytest.mark.parametrize("d", [2, 3])
 def test_recovers_known_similarity(d, rng, hand200):
     pts = hand200 if d == 2 else sphere_points(80, rng, radii=(1.0, 0.7, 0.4))
     for _ in range(20):
-        R, s, t = _rotation(d, rng), rng.uniform(0.5, 2.0), rng.uniform(-50, 50, d)
+        R, s, t = random_rotation(d, rng), rng.uniform(0.5, 2.0), rng.uniform(-50, 50, d)
         sim = align(pts, s * pts @ R.T + t)
         # exact data: recovered to rounding (1e-10 absolute, coordinates up to ~500)
         assert_allclose(sim.rotation, R, atol=1e-10)
@@ -58,7 +50,8 @@ def test_rigid_when_scale_false(rng):
 @pytest.mark.parametrize("d", [2, 3])
 def test_inverse_and_matrix(d, rng):
     pts = rng.standard_normal((15, d))
-    sim = Similarity(rotation=_rotation(d, rng), scale=1.7, translation=rng.standard_normal(d))
+    sim = Similarity(rotation=random_rotation(d, rng), scale=1.7,
+                     translation=rng.standard_normal(d))
     assert_allclose(sim.inverse().apply(sim.apply(pts)), pts, atol=1e-12)
     homog = np.c_[pts, np.ones(len(pts))] @ sim.matrix.T
     assert_allclose(homog[:, :d], sim.apply(pts), atol=1e-12)

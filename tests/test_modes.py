@@ -6,7 +6,7 @@ from numpy.testing import assert_allclose
 
 from modalmorph import FEModel, rayleigh
 
-from .conftest import sphere_points
+from .conftest import random_rotation, sphere_points
 
 
 def _check_modes(model, n=None):
@@ -46,18 +46,10 @@ def test_lowest_subset_matches_full(hand200):
     assert_allclose(overlap[separated] / norms[separated], 1.0, atol=1e-6)
 
 
-def _rotation(d, rng):
-    q, r = np.linalg.qr(rng.standard_normal((d, d)))
-    q = q * np.sign(np.diag(r))
-    if np.linalg.det(q) < 0:
-        q[:, 0] = -q[:, 0]
-    return q
-
-
 @pytest.mark.parametrize("d", [2, 3])
 def test_frequencies_invariant_to_similarity(d, hand200, rng):
     pts = hand200 if d == 2 else sphere_points(100, rng, radii=(1.0, 0.6, 0.3))
-    moved = 37.5 * pts @ _rotation(d, rng).T + rng.uniform(-100, 100, d)
+    moved = 37.5 * pts @ random_rotation(d, rng).T + rng.uniform(-100, 100, d)
     f0 = FEModel(pts).modes().frequencies
     f1 = FEModel(moved).modes().frequencies
     # the model works in the normalised frame: rotation, translation and units vanish
