@@ -101,3 +101,17 @@ def test_subset_sizes(hand200, n):
     model = FEModel(hand200)
     low = _check_modes(model, n)
     assert_allclose(low.frequencies, model.modes().frequencies[:n], rtol=1e-9)
+
+
+def test_modes_at_own_nodes_is_phi(hand200):
+    model = FEModel(hand200)
+    modes = model.modes(12)
+    # u(X_j) = sum_k g_k(X_j) psi_k = (G psi)_j: exactly Phi, up to the 1e-10 cutoff of g
+    assert_allclose(model.modes_at(modes, model.points), modes.shapes,
+                    atol=1e-8 * np.abs(modes.shapes).max())
+
+
+def test_modes_at_far_point_is_refused(hand200):
+    model = FEModel(hand200)
+    with pytest.raises(ValueError, match="beyond the cutoff radius"):
+        model.modes_at(model.modes(3), np.array([[50.0, 50.0]]))

@@ -186,6 +186,41 @@ class FEModel:
         interact. See :func:`cutoff_radius`."""
         return cutoff_radius(self.sigma, self.cutoff)
 
+    def field(self, points: np.ndarray) -> sparse.csr_array:
+        """``g_k(x_p)`` (2) at points ``x_p`` (normalised frame) for every node ``k``.
+
+        A sparse (p, m) matrix; entries beyond :attr:`cutoff_radius` are dropped as in the
+        sparse Gram matrices. The element's displacement field at the points is then
+        ``u(x_p) = sum_k g_k(x_p) psi_k`` (1)-(4): see :meth:`modes_at`.
+
+        Raises
+        ------
+        ValueError
+            When a point lies beyond the cutoff radius of every node.
+        """
+        points = np.asarray(points, dtype=np.float64)
+        dist = cKDTree(points).sparse_distance_matrix(cKDTree(self.points), self.cutoff_radius,
+                                                      output_type="coo_matrix")
+        g = sparse.csr_array((np.exp(-dist.data**2 / (2 * self.sigma**2)),
+                              (dist.row, dist.col)), shape=(len(points), self.m))
+        far = np.flatnonzero(g.sum(axis=1) == 0)
+        if far.size:
+            raise ValueError(f"point {far[0]} lies beyond the cutoff radius of every node of "
+                             f"the model: use more model nodes or a larger sigma")
+        return g
+
+    def modes_at(self, modes, points: np.ndarray) -> np.ndarray:
+        """Mode shapes evaluated at arbitrary points (normalised frame), shape (d*p, n).
+
+        Uses the element's own interpolation ``u(x) = sum_k g_k(x) psi_k`` with
+        ``Phi = (I kron G) psi`` (1)-(4): at the model's nodes this is exactly ``Phi``. It
+        lets a coarse model describe a dense point set (a reduced model).
+        """
+        d, m = self.dim, self.m
+        g = self.field(points)
+        psi = modes.gaussian.reshape(d, m, -1)
+        return np.concatenate([g @ psi[a] for a in range(d)], axis=0)
+
     def _check_dense(self, what: str) -> None:
         dof = self.dim * self.m
         if dof > DENSE_MAX_DOF:

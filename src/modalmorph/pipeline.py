@@ -227,9 +227,8 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
     if reduced is work:
         Phi, spread = md.shapes, None
     else:  # modes at every node: u(x) = sum_k g_k(x) psi_k (1)-(4), truncated like G
-        g_eval = _field_matrix(X1, model)
-        Phi = (g_eval @ md.gaussian.reshape(d, model.m, -1).transpose(1, 0, 2)
-               .reshape(model.m, -1)).reshape(m, d, -1).transpose(1, 0, 2).reshape(d * m, -1)
+        Phi = model.modes_at(md, X1)
+        g_eval = model.field(X1)
         spread = g_eval / g_eval.sum(axis=0)  # each model node's energy over the nodes
     loads_rule = LoadTargets(X1, Y, pairs, ordered=bool(work.ordered), closed=work.closed,
                              target_closed=tgt.closed, neighbours=neighbours)
@@ -318,25 +317,6 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
                  node_energy=np.array(e_node), mean_distance=np.array(dist) * size,
                  matching=matching, similarity=similarity, converged=converged,
                  stop_reason=stop, source=src, target=tgt, params=params)
-
-
-def _field_matrix(points, model):
-    """``g_k(x_p)`` (2) for every point and model node, as a sparse (p, m) matrix: entries
-    beyond the model's cutoff radius are dropped like those of its Gram matrices."""
-    from scipy import sparse
-    from scipy.spatial import cKDTree
-
-    from .element import cutoff_radius
-
-    radius = cutoff_radius(model.sigma, model.cutoff)
-    dist = cKDTree(points).sparse_distance_matrix(cKDTree(model.points), radius,
-                                                  output_type="coo_matrix")
-    g = sparse.csr_array((np.exp(-dist.data**2 / (2 * model.sigma**2)),
-                          (dist.row, dist.col)), shape=(len(points), model.m))
-    if np.any(g.sum(axis=1) == 0):
-        raise ValueError("a node lies farther than the cutoff radius from every model node: "
-                         "raise model_nodes or sigma")
-    return g
 
 
 def _frequency_range(K_mod):
