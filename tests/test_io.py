@@ -218,13 +218,40 @@ def test_svg_several_subpaths_warns(tmp_path):
     assert shape.points.max() <= 10
 
 
+def test_svg_circle_ellipse_rect_and_viewbox(tmp_path):
+    body = ('<g transform="translate(100, 0)"><circle cx="0" cy="100" r="40"/></g>'
+            '<rect width="5" height="5"/>')
+    shape = read_shape(_svg(tmp_path, body, "circle.svg"))
+    assert shape.closed
+    # chords of 128 samples per quarter circle sag by 1 - cos(pi / 512) = 1.9e-5 of r
+    assert_allclose(np.linalg.norm(shape.points - [100, 100], axis=1), 40, rtol=3e-5)
+    shape = read_shape(_svg(tmp_path, '<ellipse cx="50" cy="40" rx="30" ry="20"/>',
+                            "ellipse.svg"))
+    assert_allclose(np.hypot((shape.points[:, 0] - 50) / 30, (shape.points[:, 1] - 40) / 20),
+                    1, rtol=5e-5)  # on the ellipse, up to chord sag as above
+    verts = np.array([[10, 20], [40, 20], [40, 30], [10, 30]], dtype=float)
+    shape = read_shape(_svg(tmp_path, '<rect x="10" y="20" width="30" height="10"/>',
+                            "rect.svg"), nodes=80)
+    assert shape.closed and _dist_to_polygon(shape.points, verts).max() < 1e-9
+    # a viewBox scales the drawing to width x height; the shape stays in user units
+    path = tmp_path / "viewbox.svg"
+    path.write_text('<svg xmlns="http://www.w3.org/2000/svg" width="10cm" height="5cm" '
+                    'viewBox="0 0 100 50"><rect x="10" y="20" width="30" height="10"/></svg>')
+    shape = read_shape(path, nodes=80)
+    assert _dist_to_polygon(shape.points, verts).max() < 1e-9
+
+
 @pytest.mark.parametrize("body, message", [
-    ('<circle cx="1" cy="1" r="1"/>', "no <path>, <polygon> or <polyline>"),
-    ('<path d="M 0 0 L 10 x"/>', "<path>: expected a number"),
+    ('<line x1="0" y1="0" x2="1" y2="1"/><text>M0 0</text>',
+     "no <path>, <polygon>, <polyline>, <circle>, <ellipse> or <rect>"),
+    ('<path d="M 0 0 L 10 x"/>', "<path>: malformed path data at character 11 of d: 'x'"),
+    ('<path d="M 0 0 L 10 10 junk"/>', "<path>: malformed path data at character 14"),
+    ('<path d="M 0 0 L 1 2 3"/>', "<path>: malformed path data"),
     ('<path d="L 0 0 L 10 0"/>', "must start with M"),
     ('<path d="M 0 0"/>', "has no segments"),
-    ('<polygon points="0,0 1"/>', "odd number of coordinates"),
-    ('<path d="M0 0 L1 0 L1 1" transform="wobble(3)"/>', "unsupported transform"),
+    ('<polygon points="0,0 1"/>', "<polygon>: cannot read '1' in 'points'"),
+    ('<path d="M0 0 L1 0 L1 1" transform="wobble(3)"/>', "cannot read 'wobble(3)' in 'transform'"),
+    ('<g transform="skewX(5) bend(1)"><path d="M0 0 L1 0 L1 1"/></g>', "'bend(1)'"),
 ])
 def test_svg_errors(tmp_path, body, message):
     path = _svg(tmp_path, body)
@@ -600,6 +627,7 @@ def test_atomic_write(tmp_path):
     ("meshio", "a.ply", "modalmorph[mesh]"),
     ("PIL", "a.png", "modalmorph[images]"),
     ("skimage.measure", "a.png", "modalmorph[images]"),
+    ("svgelements", "a.svg", "modalmorph[images]"),
 ])
 def test_missing_optional_library(tmp_path, monkeypatch, module, filename, extra):
     monkeypatch.setitem(sys.modules, module, None)  # import fails as if not installed

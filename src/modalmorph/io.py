@@ -8,7 +8,7 @@ extensions                             content                             needs
 ``.csv`` ``.tsv`` ``.txt``             ``x, y[, z]`` per row               numpy
 ``.npy`` ``.npz``                      an (m, d) array                     numpy
 ``.json``                              ``[[x, y], ...]`` or an object      numpy
-``.svg``                               the first path/polygon/polyline     numpy
+``.svg``                               the first path, polygon, etc.       ``[images]``
 ``.png`` ``.tif`` ``.tiff`` ``.jpg``   the largest object's contour        ``[images]``
 ``.jpeg`` ``.bmp``
 ``.ply`` ``.obj`` ``.stl`` ``.off``    a triangle surface or point cloud   ``[mesh]``
@@ -25,7 +25,6 @@ import dataclasses
 import json
 import math
 import os
-import re
 import shutil
 import tempfile
 import warnings
@@ -86,9 +85,12 @@ def read_shape(path, *, nodes: int | None = None, threshold: float | None = None
         - ``.json``: a list ``[[x, y], ...]`` or an object ``{"points": [...],
           "closed": bool, "faces": [[i, j, k], ...]}`` (``closed`` and ``faces``
           optional).
-        - ``.svg``: the first ``<path>``, ``<polygon>`` or ``<polyline>`` (transforms
-          applied; for a path with several subpaths, the first), sampled uniformly by arc
-          length. Coordinates are SVG user units, with y pointing down.
+        - ``.svg``: the first ``<path>``, ``<polygon>``, ``<polyline>``, ``<circle>``,
+          ``<ellipse>`` or ``<rect>`` drawn (not in ``<defs>``; transforms applied; for a
+          path with several subpaths, the first), read with svgelements and sampled
+          uniformly by arc length. Closed if it ends with ``Z``, is a polygon, circle,
+          ellipse or rect, or ends where it starts. Coordinates are the file's user units
+          (before any ``viewBox`` scaling), with y pointing down.
         - ``.png``, ``.tif``/``.tiff``, ``.jpg``/``.jpeg``, ``.bmp``: the outer contour of
           the largest object, in pixel coordinates ``(x, y) = (column, row)``. A two-level
           image is a mask; a grey-level image needs ``threshold``. Whichever side covers
@@ -123,10 +125,10 @@ def read_shape(path, *, nodes: int | None = None, threshold: float | None = None
     ValueError
         Whenever the file cannot give a valid shape: missing, empty, unknown extension,
         non-numeric or non-finite values (with the line or node), wrong number of
-        columns, fewer than 3 nodes, an image with no object, an unreadable image or
+        columns, fewer than 3 nodes, an image with no object, an unreadable image, SVG or
         mesh. The message starts with the file's name.
     ImportError
-        When an image or mesh needs an optional library that is not installed.
+        When an image, SVG or mesh needs an optional library that is not installed.
     """
     name = os.fspath(path)
     path = Path(path)
@@ -358,42 +360,42 @@ def _read_json(path: Path, name: str):
 
 # -- SVG --------------------------------------------------------------------------------
 
-_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
-_SEPARATORS = re.compile(r"[\s,]*")
-_ARGS = {"M": 2, "L": 2, "H": 1, "V": 1, "C": 6, "S": 4, "Q": 4, "T": 2, "A": 7, "Z": 0}
+# The outlines read from an SVG, in document order; svgelements gives <circle>, <ellipse>
+# and <rect> as paths too.
+_SVG_TAGS = ("path", "polygon", "polyline", "circle", "ellipse", "rect")
 
 
 def _read_svg(path: Path, name: str):
     try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as exc:
+        import svgelements as se
+    except ImportError:
+        raise ImportError("reading SVG needs svgelements: pip install 'modalmorph[images]'"
+                          ) from None
+    try:
+        svg = se.SVG.parse(os.fspath(path))
+    except (ET.ParseError, ValueError) as exc:
         raise ValueError(f"{name}: not a valid SVG (XML) file: {exc}") from None
-    try:
-        found = _first_outline(root, np.eye(3))
-    except ValueError as exc:
-        raise ValueError(f"{name}: {exc}") from None
-    if found is None:
-        raise ValueError(f"{name}: no <path>, <polygon> or <polyline> element")
-    element, matrix = found
-    tag = _local(element.tag)
-    try:
-        if tag == "path":
-            subpaths = _parse_path(element.get("d", ""))
-        else:
-            coords = [float(v) for v in _numbers(element.get("points", ""))]
-            if len(coords) % 2:
-                raise ValueError("odd number of coordinates in 'points'")
-            subpaths = [(np.reshape(coords, (-1, 2)), tag == "polygon")]
-    except ValueError as exc:
-        raise ValueError(f"{name}: <{tag}>: {exc}") from None
-    subpaths = [(p, c) for p, c in subpaths if len(p) > 1]
-    if not subpaths:
+    kinds = tuple(getattr(se, tag.capitalize()) for tag in _SVG_TAGS)
+    element = next((e for e in svg.elements() if isinstance(e, kinds)), None)  # not <defs>
+    if element is None:
+        raise ValueError(f"{name}: no {', '.join(f'<{t}>' for t in _SVG_TAGS[:-1])} or "
+                         f"<{_SVG_TAGS[-1]}> element")
+    tag = type(element).__name__.lower()
+    _check_svg_source(se, element, f"{name}: <{tag}>")
+    if svg.viewbox is not None:  # back from the viewport to the file's user units
+        element = element * ~se.Matrix(svg.viewbox_transform)
+    drawn = [list(sub) for sub in abs(se.Path(element)).as_subpaths()]  # transforms applied
+    drawn = [segs for segs in drawn if len(segs) > 1]
+    if not drawn:
         raise ValueError(f"{name}: the first <{tag}> has no segments")
-    if len(subpaths) > 1:
-        warnings.warn(f"{name}: the <{tag}> has {len(subpaths)} subpaths; using the first",
+    if len(drawn) > 1:
+        warnings.warn(f"{name}: the <{tag}> has {len(drawn)} subpaths; using the first",
                       stacklevel=3)
-    pts, closed = subpaths[0]
-    pts = pts @ matrix[:2, :2].T + matrix[:2, 2]
+    segments = drawn[0]
+    t = np.linspace(0.0, 1.0, _SVG_SAMPLES + 1)[1:]
+    pts = np.vstack([np.array(segments[0].end)[None]]
+                    + [seg.npoint(t) for seg in segments[1:]])
+    closed = isinstance(segments[-1], se.Close)
     keep = np.r_[True, np.any(np.diff(pts, axis=0) != 0, axis=1)]
     pts = pts[keep]  # zero-length segments add nothing to the outline
     if len(pts) > 1 and np.allclose(pts[0], pts[-1], rtol=0, atol=1e-12 * np.abs(pts).max()):
@@ -401,214 +403,26 @@ def _read_svg(path: Path, name: str):
     return pts, closed
 
 
-def _local(tag) -> str:
-    return tag.rsplit("}", 1)[-1] if isinstance(tag, str) else ""
-
-
-def _first_outline(element, matrix):
-    """The first path/polygon/polyline in document order, with its accumulated transform."""
-    if element.get("transform"):
-        matrix = matrix @ _parse_transform(element.get("transform"))
-    if _local(element.tag) in ("path", "polygon", "polyline"):
-        return element, matrix
-    if _local(element.tag) in ("defs", "clipPath", "mask", "symbol", "marker", "pattern"):
-        return None  # not drawn where it is defined
-    for child in element:
-        found = _first_outline(child, matrix)
-        if found is not None:
-            return found
-    return None
-
-
-def _numbers(text: str) -> list[str]:
-    rest = _NUMBER.sub(" ", text)
-    if rest.strip(" \t\r\n,"):
-        bad = rest.strip(" \t\r\n,")[0]
-        raise ValueError(f"unexpected character {bad!r} in {text[:40]!r}")
-    return _NUMBER.findall(text)
-
-
-def _parse_transform(text: str) -> np.ndarray:
-    matrix = np.eye(3)
-    for func, args in re.findall(r"(\w+)\s*\(([^)]*)\)", text):
-        v = [float(a) for a in _NUMBER.findall(args)]
-        m = np.eye(3)
-        if func == "matrix" and len(v) == 6:
-            m[:2] = [[v[0], v[2], v[4]], [v[1], v[3], v[5]]]
-        elif func == "translate" and len(v) in (1, 2):
-            m[:2, 2] = [v[0], v[1] if len(v) == 2 else 0.0]
-        elif func == "scale" and len(v) in (1, 2):
-            m[0, 0], m[1, 1] = v[0], v[-1]
-        elif func == "rotate" and len(v) in (1, 3):
-            c, s = math.cos(math.radians(v[0])), math.sin(math.radians(v[0]))
-            m[:2, :2] = [[c, -s], [s, c]]
-            if len(v) == 3:
-                m[:2, 2] = np.array(v[1:]) - m[:2, :2] @ v[1:]
-        elif func == "skewX" and len(v) == 1:
-            m[0, 1] = math.tan(math.radians(v[0]))
-        elif func == "skewY" and len(v) == 1:
-            m[1, 0] = math.tan(math.radians(v[0]))
-        else:
-            raise ValueError(f"unsupported transform {func}({args})")
-        matrix = matrix @ m
-    return matrix
-
-
-class _PathScanner:
-    """Reads an SVG path's d-attribute: commands, numbers and arc flags."""
-
-    def __init__(self, d: str):
-        self.d, self.i = d, 0
-
-    def skip(self):
-        self.i = _SEPARATORS.match(self.d, self.i).end()
-
-    def done(self) -> bool:
-        self.skip()
-        return self.i >= len(self.d)
-
-    def command(self) -> str | None:
-        self.skip()
-        if self.i < len(self.d) and self.d[self.i].upper() in _ARGS:
-            self.i += 1
-            return self.d[self.i - 1]
-        return None
-
-    def number(self) -> float:
-        self.skip()
-        match = _NUMBER.match(self.d, self.i)
-        if match is None:
-            found = self.d[self.i:self.i + 10] or "the end"
-            raise ValueError(f"expected a number at character {self.i} of d, found "
-                             f"{found!r}")
-        self.i = match.end()
-        return float(match.group())
-
-    def flag(self) -> bool:
-        self.skip()
-        if self.i >= len(self.d) or self.d[self.i] not in "01":
-            raise ValueError(f"expected an arc flag 0 or 1 at character {self.i} of d")
-        self.i += 1
-        return self.d[self.i - 1] == "1"
-
-
-def _parse_path(d: str) -> list[tuple[np.ndarray, bool]]:
-    """Flatten an SVG path into polylines, one (points (n, 2), closed) per subpath."""
-    scan = _PathScanner(d)
-    subpaths: list[tuple[np.ndarray, bool]] = []
-    current: list[np.ndarray] = []
-    pos = start = np.zeros(2)
-    last_control, last_cmd = None, None
-    cmd = scan.command()
-    if cmd is None and not scan.done():
-        raise ValueError(f"d must start with a command, got {d[:20]!r}")
-    if cmd is not None and cmd.upper() != "M":
-        raise ValueError(f"d must start with M or m, got {cmd!r}")
-
-    def finish(closed):
-        if current:
-            subpaths.append((np.vstack(current), closed))
-        current.clear()
-
-    while cmd is not None:
-        upper, rel = cmd.upper(), cmd.islower()
-        origin = pos if rel else np.zeros(2)
-        while True:
-            if upper == "Z":
-                if current:
-                    current.append(start[None])
-                finish(True)
-                pos, last_control = start, None
-            elif upper == "M":
-                finish(False)
-                pos = start = origin + [scan.number(), scan.number()]
-                current.append(pos[None])
-                last_control = None
-            elif upper in "LHV":
-                if not current:
-                    current.append(pos[None])
-                if upper == "L":
-                    end = origin + [scan.number(), scan.number()]
-                elif upper == "H":
-                    end = np.array([scan.number() + origin[0], pos[1]])
-                else:
-                    end = np.array([pos[0], scan.number() + origin[1]])
-                current.append(end[None])
-                pos, last_control = end, None
-            elif upper in "CSQT":
-                if not current:
-                    current.append(pos[None])
-                smooth = {"S": "CS", "T": "QT"}.get(upper)
-                if smooth:
-                    reflect = last_control is not None and last_cmd in smooth
-                    c1 = 2 * pos - last_control if reflect else pos
-                    ctrl = [c1] + [origin + [scan.number(), scan.number()]
-                                   for _ in range(_ARGS[upper] // 2)]
-                else:
-                    ctrl = [origin + [scan.number(), scan.number()]
-                            for _ in range(_ARGS[upper] // 2)]
-                control = np.vstack([pos, *ctrl])
-                current.append(_bezier(control)[1:])
-                pos, last_control = control[-1], control[-2]
-            else:  # A
-                if not current:
-                    current.append(pos[None])
-                rx, ry, phi = abs(scan.number()), abs(scan.number()), scan.number()
-                large, sweep = scan.flag(), scan.flag()
-                end = origin + [scan.number(), scan.number()]
-                current.append(_arc(pos, end, rx, ry, phi, large, sweep)[1:])
-                pos, last_control = end, None
-            last_cmd = upper
-            next_cmd = scan.command()
-            if next_cmd is not None or scan.done():
-                cmd = next_cmd
-                break
-            if upper == "Z":
-                raise ValueError(f"unexpected number after Z at character {scan.i} of d")
-            # repeated arguments: the same command again (a moveto continues as lineto)
-            if upper == "M":
-                upper = "L"
-            origin = pos if rel else np.zeros(2)
-    if not scan.done():
-        raise ValueError(f"unexpected {d[scan.i:scan.i + 10]!r} at character {scan.i} of d")
-    finish(False)
-    return subpaths
-
-
-def _bezier(control: np.ndarray) -> np.ndarray:
-    """Points on the Bézier curve with these control points (Bernstein form)."""
-    n = len(control) - 1
-    t = np.linspace(0.0, 1.0, _SVG_SAMPLES + 1)[:, None]
-    coeff = [math.comb(n, k) * t**k * (1 - t) ** (n - k) for k in range(n + 1)]
-    return sum(c * p for c, p in zip(coeff, control, strict=True))
-
-
-def _arc(p0, p1, rx, ry, phi_deg, large, sweep) -> np.ndarray:
-    """Points on an SVG elliptical arc (endpoint to centre form, SVG 1.1 appendix F.6.5)."""
-    if rx == 0 or ry == 0 or np.array_equal(p0, p1):
-        return np.vstack([p0, p1])  # F.6.2: a straight line (or nothing)
-    phi = math.radians(phi_deg % 360)
-    c, s = math.cos(phi), math.sin(phi)
-    rot = np.array([[c, -s], [s, c]])
-    x1, y1 = rot.T @ ((p0 - p1) / 2)
-    lam = (x1 / rx) ** 2 + (y1 / ry) ** 2
-    if lam > 1:  # F.6.6: radii too small, scale them up
-        rx, ry = rx * math.sqrt(lam), ry * math.sqrt(lam)
-    num = max(0.0, (rx * ry) ** 2 - (rx * y1) ** 2 - (ry * x1) ** 2)
-    coef = math.sqrt(num / ((rx * y1) ** 2 + (ry * x1) ** 2))
-    if large == sweep:
-        coef = -coef
-    cx1, cy1 = coef * rx * y1 / ry, -coef * ry * x1 / rx
-    centre = rot @ [cx1, cy1] + (p0 + p1) / 2
-    theta1 = math.atan2((y1 - cy1) / ry, (x1 - cx1) / rx)
-    theta2 = math.atan2((-y1 - cy1) / ry, (-x1 - cx1) / rx)
-    delta = (theta2 - theta1) % (2 * math.pi)
-    if not sweep and delta > 0:
-        delta -= 2 * math.pi
-    theta = theta1 + np.linspace(0.0, delta, _SVG_SAMPLES + 1)
-    pts = np.column_stack([rx * np.cos(theta), ry * np.sin(theta)]) @ rot.T + centre
-    pts[0], pts[-1] = p0, p1  # exact endpoints
-    return pts
+def _check_svg_source(se, element, where: str) -> None:
+    """Raise for what svgelements, like a browser, skips: bad path data, points, transforms."""
+    d = element.values.get("d")
+    if d is not None:
+        lexer = se.SVGLexicalParser()
+        try:
+            lexer.parse(se.Path(), d)
+            ok = not d[lexer.pos:].strip(" \t\r\n,")
+        except ValueError:
+            ok = False
+        if not ok:
+            raise ValueError(f"{where}: malformed path data at character {lexer.pos} of d: "
+                             f"{d[lexer.pos:lexer.pos + 10] or 'the end'!r}")
+        if d.strip()[:1] not in ("M", "m"):
+            raise ValueError(f"{where}: path data must start with M or m, got {d[:20]!r}")
+    for attr, grammar in (("points", se.REGEX_COORD_PAIR),
+                          ("transform", se.REGEX_TRANSFORM_TEMPLATE)):
+        rest = grammar.sub(" ", element.values.get(attr, "").lower()).strip(" \t\r\n,")
+        if rest:
+            raise ValueError(f"{where}: cannot read {rest[:20]!r} in {attr!r}")
 
 
 # -- images -----------------------------------------------------------------------------
