@@ -206,3 +206,15 @@ def test_reduced_model_close_to_full():
     # the same physics on a coarser mesh: intermediate shapes within 2% of the size
     gap = np.linalg.norm(full.shapes - reduced.shapes, axis=2).max()
     assert gap < 0.02 * _rms(b)
+
+
+@pytest.mark.parametrize("n, model_nodes", [(100, 300), (600, 200)])
+def test_initial_displacement_moves_faster(n, model_nodes):
+    """(17)-(18): larger c_x and c_v give larger first steps, as the paper reports."""
+    a, b = _dense_hands(n)
+    pairs = np.c_[np.arange(n), np.arange(n)]
+    rest = morph(a, b, matching=pairs, model_nodes=model_nodes)
+    quick = morph(a, b, matching=pairs, c_x=0.5, c_v=0.5, model_nodes=model_nodes)
+    assert_allclose(quick.shapes[0], a)  # step 0 is still the source
+    assert quick.mean_distance[1] < rest.mean_distance[1]
+    assert quick.converged and quick.steps <= rest.steps

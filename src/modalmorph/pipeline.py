@@ -262,7 +262,10 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
     T0 = loads_rule.targets(X1)
     U0 = c_x * flat(T0 - X1)  # (21): U0 = (c_x / k) R0
     # X0 = Phi^T M U0; with a reduced model, the least-squares fit of the field to U0
-    x = MPhi.T @ U0 if spread is None else np.linalg.lstsq(Phi, U0, rcond=None)[0]
+    if c_x == 0:
+        x = np.zeros(len(w2))
+    else:
+        x = MPhi.T @ U0 if spread is None else np.linalg.lstsq(Phi, U0, rcond=None)[0]
     v = c_v * x  # (18)
     f_const = k_abs * (Phi.T @ flat(T0 - X1))
     f = f_const - (0.0 if scheme == "implicit" else k_abs * (Phi.T @ U0))
