@@ -232,3 +232,26 @@ def test_bad_input(hand90):
         match(hand90, hand90, sigma=-1.0)
     with pytest.raises(ValueError, match="reject must be"):
         match(hand90, hand90, reject=0.0)
+
+
+def test_large_objects_agree_with_exact_path(monkeypatch):
+    """Above LARGE nodes the default matcher works on COARSE nodes and refines in linear
+    memory; where both paths run, their partners agree within one coarse spacing."""
+    import modalmorph.matching as matching
+
+    (source, _), (target, _) = _hand(800, 0.3), _hand(880, 2.7)
+    exact = match(source, target)
+    monkeypatch.setattr(matching, "LARGE", 400)
+    monkeypatch.setattr(matching, "COARSE", 300)
+    coarse = match(source, target)
+    partner = dict(map(tuple, exact.pairs))
+    both = [(i, j) for i, j in coarse.pairs if i in partner]
+    gap = np.array([abs((j - partner[i] + 440) % 880 - 440) for i, j in both])
+    assert len(both) >= 0.9 * len(source)
+    assert np.mean(gap <= 880 / 300) >= 0.95  # within one coarse target spacing
+
+
+def test_paper_searches_refuse_huge_affinity():
+    big = np.c_[np.cos(np.linspace(0, 6.2, 7000)), np.sin(np.linspace(0, 6.2, 7000))]
+    with pytest.raises(ValueError, match="affinity matrix .* use method='auto'"):
+        match(big, big, method="global")

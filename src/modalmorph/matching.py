@@ -42,7 +42,12 @@ METHODS = ("auto", "local", "global")
 # sigma 3 -> Gram matrix singular on a 160-node model; 48 modes -> 0.92/0.90 vs 24.
 DEFAULT_MODES = 24  # modes describing each node
 DEFAULT_SIGMA = 2.0  # Gaussian width for matching, x mean node spacing of the model
-MAX_MODEL_NODES = 160  # larger objects are modelled on an evenly spread subset of nodes
+MAX_MODEL_NODES = 160
+# Objects with more nodes are matched on COARSE nodes, then refined (linear memory).
+LARGE = 2000
+COARSE = 1000
+# Largest m x n affinity matrix the paper's local/global searches may build.
+MAX_AFFINITY = 4e7  # larger objects are modelled on an evenly spread subset of nodes
 _COARSE_NODES = 64  # resolution of the pose search of the default method
 _ANGLES = 24  # rotations tried by the pose search in 2D
 
@@ -398,7 +403,10 @@ _AUTO = dict(skip=_SKIP, sig_weight=_SIG_WEIGHT, width=_SIG_WIDTH, rigid=_RIGID,
 
 
 def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: float,
-                options: dict | None = None) -> tuple[np.ndarray, np.ndarray, Similarity]:
+                options: dict | None = None
+                ) -> tuple[np.ndarray, np.ndarray, Similarity, np.ndarray]:
+    """The default matcher; also returns where the fitted similarity and deformation take
+    every source node (the target's user coordinates), shape (m, d)."""
     opt = dict(_AUTO, **(options or {}))
     x, y = src.normalized, tgt.normalized
     n, d = tgt.m, src.dim
@@ -479,7 +487,35 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
     keep = cost <= reject
     pairs, cost = pairs[keep], cost[keep]
     pairs = np.c_[pairs[:, 0], order[pairs[:, 1]]]
-    return pairs, cost, align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]])
+    landed = tgt.to_user(z)  # where the fitted similarity and deformation take the source
+    return pairs, cost, align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]]), landed
+
+
+def _match_large(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: float,
+                 coarse: int) -> tuple[np.ndarray, np.ndarray, Similarity]:
+    """The default matcher for large objects, in memory linear in the node counts.
+
+    Both objects are matched on ``coarse`` nodes spread evenly over them; every source
+    node is then carried by the fitted similarity and deformation of its nearest coarse
+    nodes (inverse-distance weights) and paired with the target node nearest to where it
+    lands (k-d trees); pairs farther than ``sqrt(reject)`` target spacings are dropped.
+    The correspondence is as good as the coarse one: within about one coarse spacing
+    along a contour, not one node of the dense sampling.
+    """
+    ci, cj = _model_subset(src, coarse), _model_subset(tgt, coarse)
+    sub_s = Shape(src.points[ci], closed=src.closed, ordered=src.ordered)
+    sub_t = Shape(tgt.points[cj], closed=tgt.closed, ordered=tgt.ordered)
+    *_, landed_c = _match_auto(sub_s, sub_t, n_modes, sigma, reject)
+    dist, near = cKDTree(sub_s.points).query(src.points, k=4)
+    w = 1.0 / np.maximum(dist, 1e-12 * src.size)
+    w /= w.sum(axis=1, keepdims=True)
+    landed = src.points + np.einsum("ik,ikd->id", w, (landed_c - sub_s.points)[near])
+    j = cKDTree(tgt.points).query(landed)[1]
+    gap = np.linalg.norm(tgt.points[j] - landed, axis=1)
+    cost = (gap / (tgt.spacing * tgt.size)) ** 2  # in squared target node spacings
+    keep = cost <= reject
+    pairs = np.c_[np.flatnonzero(keep), j[keep]]
+    return pairs, cost[keep], align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]])
 
 
 def match(source, target, *, method: str = "auto", modes: int | None = None,
@@ -535,10 +571,16 @@ def match(source, target, *, method: str = "auto", modes: int | None = None,
     if reject is not None and not reject > 0:
         raise ValueError(f"reject must be > 0, got {reject}")
     sim = None
-    if method == "auto":
-        pairs, cost, sim = _match_auto(src, tgt, n_modes, sigma,
-                                       _REJECT if reject is None else reject)
+    reject_auto = _REJECT if reject is None else reject
+    if method == "auto" and max(src.m, tgt.m) > LARGE:
+        pairs, cost, sim = _match_large(src, tgt, n_modes, sigma, reject_auto, COARSE)
+    elif method == "auto":
+        pairs, cost, sim, _ = _match_auto(src, tgt, n_modes, sigma, reject_auto)
     else:
+        if src.m * tgt.m > MAX_AFFINITY:
+            raise ValueError(f"method={method!r} builds the full {src.m} x {tgt.m} affinity "
+                             f"matrix (8), too large here; use method='auto', which "
+                             f"matches large objects in linear memory")
         phi1, _ = modal_features(src, n_modes, sigma=sigma)
         phi2, _ = modal_features(tgt, n_modes, sigma=sigma)
         Z = affinity(phi1, _fix_signs(phi1, phi2))  # (8)
