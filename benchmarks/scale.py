@@ -1,28 +1,59 @@
 """Large objects: time and peak memory per stage, sparse against dense (issue 6).
 
-Cases: the bundled hand outline resampled to 1k, 4k, 16k and 64k nodes (2D contours), and
-deformed ellipsoids (Fibonacci lattice) of 10k and 100k nodes (3D point sets).
+Cases: pairs of objects at 1k, 4k, 16k and 64k nodes (2D contours) and 10k and 100k nodes
+(3D point sets), each a source and a different target:
 
-Each case runs in its own subprocess, so that its peak memory can be read honestly: the
+- 2D: the bundled hands 0 and 3, both resampled at the same ``m`` contour parameters
+  (linear interpolation between rows, as ``tests/test_pipeline.py::_dense_hands``). The
+  hands are in row correspondence, so node ``i`` of the source belongs with node ``i`` of
+  the target: the ground truth (anatomical, fuzzy by some ten rows; see
+  ``benchmarks/matching.py``).
+- 3D: a deformed ellipsoid (Fibonacci lattice, a bump on top and one off the axes, so no
+  symmetry is left) and a smoothly bent, twisted and rotated copy whose rows are shuffled;
+  the shuffle is the ground truth. Both are unordered point clouds.
+
+Each stage runs in its own subprocess, so that its peak memory can be read honestly: the
 child's peak resident set size (``resource.getrusage(...).ru_maxrss``, which includes the
 interpreter and numpy, about 60 MB) is reported, not a tracemalloc count (that misses
 memory allocated by SuperLU and ARPACK). A child gets a wall-clock timeout and an address
 space limit (``--mem-limit``) so that a case too large for the machine fails instead of
-swapping; such a case is reported as ``timeout`` or ``out of memory``.
+swapping; such a stage is reported as ``timeout`` or ``out of memory``.
 
-Stages (one function each; matching and morphing columns are to be added the same way):
+Stages (one function each):
 
-- ``model``: build the sparse model (cKDTree pairs within the cutoff, sparse ``G``,
-  ``Gamma``, ``K_g``) and its lowest ``n`` modes (``solver="sparse"``);
-- ``dense``: the same with ``solver="dense"``, where it fits (up to 4k nodes in 2D);
+- ``model``: the lowest ``n`` modes of the source. 2D: the full sparse model (cKDTree
+  pairs within the cutoff, sparse ``G``, ``Gamma``, ``K_g``; ``solver="sparse"``). 3D:
+  the full model does not fit (each node has ~300 neighbours within the cutoff; 10k nodes
+  ran out of 8 GB), so the *reduced* route: ``coarsen`` to ``--reduced-nodes`` nodes
+  (farthest-point subset), the sparse model's lowest ``n`` modes on it, and
+  ``modes_at`` to evaluate them at every node. ``build s`` includes the coarsening,
+  ``eval s`` is the evaluation.
+- ``dense``: the full model with ``solver="dense"``, where it fits (up to 4k nodes in 2D).
 - ``agreement``: for cases with both, the largest relative difference of the lowest ``n``
   frequencies, and the smallest cosine of the principal angles between the two mode
   subspaces in the exact model's mass inner product (``svd(Phi_d^T M Phi_s)``; all
   cosines are 1 when the subspaces agree; the gap after mode n is printed since a small
   gap makes the n-th subspace itself ill-defined).
+- ``match``: ``modalmorph.match(source, target)`` (method ``"auto"``); the pairs found,
+  and their error against the ground truth: median and 90th percentile, 2D in rows of the
+  1590-row hands (cyclic), 3D in target node spacings.
+- ``morph``: ``modalmorph.morph(source, target, matching=pairs)`` with the pairs of the
+  ``match`` stage, or the ground-truth pairs (marked ``*``) when that stage failed;
+  steps and whether it converged.
+- ``reference`` (2D cases up to ``--reference-up-to`` nodes): the dense transcription of
+  matching and morphing in ``benchmarks/morph.py`` (``reference_match``, ``reference`` for
+  as many steps as ``morph`` took), timed in the same run; speed-up = reference time /
+  (match + morph time).
 
-Run ``python benchmarks/scale.py`` (all cases; the 100k-node 3D case is expected to fail
-its limits, see the report) or ``--cases 2d-1k,2d-4k`` for some of them.
+A second table, ``--reduced-check`` (default on), compares the 3D reduced route with the
+full sparse model where the full one still fits (3000 nodes): lowest ``n`` frequencies
+and mode subspaces (principal angles in the full model's mass inner product, the reduced
+modes evaluated at all nodes). The reduced model is a coarser discretisation of the same
+object with sigma scaled to its node spacing: frequencies differ by tens of percent, the
+low mode subspaces much less; see the printed numbers.
+
+Run ``python benchmarks/scale.py`` (all cases, about 10 minutes on 2 loaded cores) or
+``--cases 2d-1k,2d-4k`` for some of them; ``--timeout`` is per stage.
 """
 
 from __future__ import annotations
@@ -38,11 +69,16 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 sys.path.insert(0, str(Path(__file__).parent))
-from model import ellipsoid, hand  # noqa: E402
+from model import ellipsoid  # noqa: E402
+from morph import reference, reference_match  # noqa: E402
 
-from modalmorph import FEModel  # noqa: E402
+import modalmorph as mm  # noqa: E402
+from modalmorph import FEModel, Shape  # noqa: E402
+from modalmorph.datasets import load_hand  # noqa: E402
+from modalmorph.shape import coarsen  # noqa: E402
 
 CASES = {
     "2d-1k": ("hand", 1000),
@@ -53,50 +89,201 @@ CASES = {
     "3d-100k": ("ellipsoid", 100000),
 }
 DENSE_UP_TO = 4000  # nodes, 2D: the dense solver's (2m)^2 matrices are 1 GB at 4000 nodes
+REDUCED_NODES = 2000  # 3D reduced model: 16 s for 50 modes (sparse; dense 36 s), 1.6 GB
+CHECK_NODES = 3000  # 3D size where the full sparse model and the reduced one both run
 
 
-def points_for(case: str) -> np.ndarray:
+# -- the objects ------------------------------------------------------------------------
+
+
+def hands(m: int) -> tuple[np.ndarray, np.ndarray]:
+    """Hands 0 and 3 at the same ``m`` contour parameters; row i belongs with row i."""
+    h0, h3 = load_hand(0), load_hand(3)
+    s = np.linspace(0, len(h0), m, endpoint=False)
+    i = np.floor(s).astype(int)
+    f = (s - i)[:, None]
+    nxt = (i + 1) % len(h0)
+    return h0[i] * (1 - f) + h0[nxt] * f, h3[i] * (1 - f) + h3[nxt] * f
+
+
+def blob(m: int) -> np.ndarray:
+    """``model.ellipsoid`` plus a second bump off every axis: no symmetry left, (m, 3)."""
+    p = ellipsoid(m)
+    c = np.array([0.55, 0.45, -0.2])
+    return p + 0.25 * np.exp(-np.sum((p - c) ** 2, axis=1) / 0.1)[:, None] * c
+
+
+def deform(p: np.ndarray) -> np.ndarray:
+    """A smooth bend, twist and rotation of a 3D object."""
+    x, y, z = p.T
+    q = p + 0.08 * np.c_[np.sin(2 * y), z**2 - 0.5 * x, x * y]  # bend
+    t = 0.4 * q[:, 0]  # twist about x, growing along x
+    q = np.c_[q[:, 0], q[:, 1] * np.cos(t) - q[:, 2] * np.sin(t),
+              q[:, 1] * np.sin(t) + q[:, 2] * np.cos(t)]
+    a = 0.3  # and a rotation about z
+    rot = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    return q @ rot.T + [0.1, -0.05, 0.02]
+
+
+def objects(case: str):
+    """Source, target and ``truth`` (truth[i]: the target row of source node i)."""
     kind, m = CASES[case]
-    return hand(m) if kind == "hand" else ellipsoid(m)
+    if kind == "hand":
+        a, b = hands(m)
+        return a, b, np.arange(m)
+    a = blob(m)
+    perm = np.random.default_rng(1).permutation(m)
+    b = deform(a)[perm]
+    truth = np.empty(m, dtype=np.intp)
+    truth[perm] = np.arange(m)
+    return Shape(a), Shape(b), truth
+
+
+def pair_error(case: str, b, pairs: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Error of pairs against the ground truth: 2D in rows of the 1590-row hands
+    (cyclic), 3D in mean node spacings of the target."""
+    kind, m = CASES[case]
+    i, j = pairs[:, 0], pairs[:, 1]
+    if kind == "hand":
+        d = np.abs(j - truth[i]) % m
+        return np.minimum(d, m - d) * len(load_hand(0)) / m
+    pts = b.points
+    spacing = cKDTree(pts).query(pts, k=2)[0][:, 1].mean()
+    return np.linalg.norm(pts[j] - pts[truth[i]], axis=1) / spacing
 
 
 # -- stages, each run inside a child process ----------------------------------------
 
 
-def stage_model(points: np.ndarray, n: int, out: Path) -> dict:
-    """Sparse model and its lowest n modes."""
+def reduced_modes(shape: Shape, n: int, nodes: int):
+    """The reduced route: a model on ``coarsen(shape, nodes)``, its lowest ``n`` modes, and
+    those modes at every node of ``shape``, shape (d*m, n), with the coarse model's
+    modes and the times of the three steps."""
     t0 = time.perf_counter()
-    model = FEModel(points, solver="sparse")
+    coarse = coarsen(shape, nodes)
+    model = FEModel(coarse, solver="sparse")
+    _ = model.gram_sparse, model.stiffness_gaussian_sparse
+    t1 = time.perf_counter()
+    modes = model.modes(n)
+    t2 = time.perf_counter()
+    phi = model.modes_at(modes, coarse.to_normalized(shape.points))
+    t3 = time.perf_counter()
+    return phi, modes, (t1 - t0, t2 - t1, t3 - t2)
+
+
+def stage_model(case: str, args, out: Path) -> dict:
+    """Lowest n modes: full sparse model (2D) or the reduced route (3D)."""
+    a, _, _ = objects(case)
+    n = args.modes
+    if CASES[case][0] == "ellipsoid":
+        phi, modes, (build, eig, ev) = reduced_modes(a, n, args.reduced_nodes)
+        return {"build_s": build, "modes_s": eig, "eval_s": ev,
+                "model_nodes": args.reduced_nodes, "rows": phi.shape[0]}
+    t0 = time.perf_counter()
+    model = FEModel(a, solver="sparse")
     _ = model.gram_sparse, model.stiffness_gaussian_sparse
     t1 = time.perf_counter()
     modes = model.modes(n)
     t2 = time.perf_counter()
     np.savez(out, frequencies=modes.frequencies, shapes=modes.shapes)
-    return {"build_s": t1 - t0, "modes_s": t2 - t1,
-            "pairs_per_node": 2 * len(model.pairs) / model.m,
-            "nnz_Kg": int(model.stiffness_gaussian_sparse.nnz)}
+    return {"build_s": t1 - t0, "modes_s": t2 - t1, "model_nodes": model.m,
+            "pairs_per_node": 2 * len(model.pairs) / model.m}
 
 
-def stage_dense(points: np.ndarray, n: int, out: Path) -> dict:
+def stage_dense(case: str, args, out: Path) -> dict:
     """Dense model and its lowest n modes."""
+    a, _, _ = objects(case)
     t0 = time.perf_counter()
-    model = FEModel(points, solver="dense")
+    model = FEModel(a, solver="dense")
     _ = model.gram, model.stiffness_gaussian
     t1 = time.perf_counter()
-    modes = model.modes(n + 1)
+    modes = model.modes(args.modes + 1)
     t2 = time.perf_counter()
     np.savez(out, frequencies=modes.frequencies, shapes=modes.shapes)
     return {"build_s": t1 - t0, "modes_s": t2 - t1}
 
 
-STAGES = {"model": stage_model, "dense": stage_dense}
+def stage_match(case: str, args, out: Path) -> dict:
+    """modalmorph.match, and the pairs' error against the ground truth."""
+    a, b, truth = objects(case)
+    t0 = time.perf_counter()
+    matching = mm.match(a, b)
+    t = time.perf_counter() - t0
+    np.save(out, matching.pairs)
+    err = pair_error(case, b, matching.pairs, truth)
+    return {"match_s": t, "pairs": len(matching), "err50": float(np.median(err)),
+            "err90": float(np.percentile(err, 90))}
 
 
-def agreement(points: np.ndarray, dense: Path, sparse_: Path, n: int) -> dict:
+def stage_morph(case: str, args, out: Path) -> dict:
+    """modalmorph.morph with the matched pairs (or the ground truth when none)."""
+    a, b, truth = objects(case)
+    found = out.with_name(out.name.replace("-morph", "-match") + ".npy")
+    if found.exists():
+        pairs, given = np.load(found), False
+    else:
+        pairs, given = np.c_[np.arange(len(truth)), truth], True
+    t0 = time.perf_counter()
+    r = mm.morph(a, b, matching=pairs)
+    return {"morph_s": time.perf_counter() - t0, "steps": r.steps,
+            "converged": bool(r.converged), "truth_pairs": given,
+            "stop": r.stop_reason.split(":")[0]}
+
+
+def stage_reference(case: str, args, out: Path) -> dict:
+    """The dense transcription (benchmarks/morph.py) for as many steps as morph took."""
+    a, b, _ = objects(case)
+    done = json.loads(Path(str(out).replace("-reference", "-morph") + ".json").read_text())
+    t0 = time.perf_counter()
+    pairs = reference_match(a, b)
+    t1 = time.perf_counter()
+    reference(a, b, pairs, done["steps"])
+    return {"ref_match_s": t1 - t0, "ref_morph_s": time.perf_counter() - t1}
+
+
+def stage_check(case: str, args, out: Path) -> dict:
+    """3D: the reduced route against the full sparse model at CHECK_NODES nodes."""
+    n = args.modes
+    shape = Shape(blob(CHECK_NODES))
+    t0 = time.perf_counter()
+    full = FEModel(shape, solver="sparse")
+    fm = full.modes(n + 1)
+    t_full = time.perf_counter() - t0
+    rows = []
+    for nodes in (500, 1000, 2000):
+        t0 = time.perf_counter()
+        phi, rm, _ = reduced_modes(shape, n, nodes)
+        t_red = time.perf_counter() - t0
+        # principal angles in the full model's mass inner product: M-orthonormalise phi
+        cos = np.linalg.svd(fm.shapes[:, :n].T @ full.apply_mass(_orth(phi, full)),
+                            compute_uv=False)
+        cos10 = np.linalg.svd(fm.shapes[:, :10].T @ full.apply_mass(_orth(phi[:, :10], full)),
+                              compute_uv=False)
+        ff, fr = fm.frequencies[:n], rm.frequencies
+        rows.append({"nodes": nodes, "full_s": t_full, "reduced_s": t_red,
+                     "freq_diff": float(np.max(np.abs(fr / ff - 1))),
+                     "freq_diff1": float(fr[0] / ff[0] - 1),
+                     "ratio_diff": float(np.max(np.abs(fr / fr[0] / (ff / ff[0]) - 1))),
+                     "angle10": float(1 - cos10.min()), "angle": float(1 - cos.min()),
+                     "gap": float(fm.frequencies[n] / fm.frequencies[n - 1] - 1)})
+    return {"rows": rows}
+
+
+def _orth(phi: np.ndarray, full: FEModel) -> np.ndarray:
+    """Columns of phi made orthonormal in full's mass inner product."""
+    w, v = np.linalg.eigh(phi.T @ full.apply_mass(phi))
+    return phi @ (v / np.sqrt(w))
+
+
+STAGES = {"model": stage_model, "dense": stage_dense, "match": stage_match,
+          "morph": stage_morph, "reference": stage_reference, "check": stage_check}
+
+
+def agreement(case: str, dense: Path, sparse_: Path, n: int) -> dict:
     """Frequencies and subspaces of the two solvers (run in the parent, after both)."""
     d, s = np.load(dense), np.load(sparse_)
     fd, fs = d["frequencies"], s["frequencies"]
-    exact = FEModel(points, solver="dense")
+    exact = FEModel(objects(case)[0], solver="dense")
     C = d["shapes"][:, :n].T @ exact.apply_mass(s["shapes"])
     return {"freq_rel_diff": float(np.max(np.abs(fs / fd[:n] - 1))),
             "min_cosine": float(np.linalg.svd(C, compute_uv=False).min()),
@@ -110,28 +297,33 @@ def _child(args) -> int:
     if args.mem_limit:
         limit = int(args.mem_limit * 2**30)
         resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
-    points = points_for(args.case)
+    out = Path(args.out)
     try:
-        row = STAGES[args.stage](points, args.modes, Path(args.out))
+        row = STAGES[args.stage](args.case, args, out)
     except MemoryError:
         row = {"error": "out of memory"}
     row["peak_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    Path(str(out) + ".json").write_text(json.dumps(row))
     print(json.dumps(row))
     return 0
 
 
-def run_stage(case: str, stage: str, n: int, out: Path, timeout: float,
-              mem_limit: float) -> dict:
+def run_stage(case: str, stage: str, args, tmp: str) -> dict:
+    out = Path(tmp, f"{case}-{stage}")
     cmd = [sys.executable, __file__, "--child", "--case", case, "--stage", stage,
-           "--modes", str(n), "--out", str(out), "--mem-limit", str(mem_limit)]
+           "--modes", str(args.modes), "--out", str(out), "--mem-limit",
+           str(args.mem_limit), "--reduced-nodes", str(args.reduced_nodes)]
+    t0 = time.perf_counter()
     try:
-        done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=args.timeout)
     except subprocess.TimeoutExpired:
-        return {"error": f"timeout {timeout:.0f} s"}
+        return {"error": f"timeout {args.timeout:.0f} s"}
     if done.returncode != 0:
         last = (done.stderr.strip().splitlines() or ["?"])[-1]
         return {"error": "out of memory" if "MemoryError" in done.stderr else last[:60]}
-    return json.loads(done.stdout.strip().splitlines()[-1])
+    row = json.loads(done.stdout.strip().splitlines()[-1])
+    row["wall_s"] = time.perf_counter() - t0
+    return row
 
 
 def _fmt(row: dict, key: str, spec: str) -> str:
@@ -139,14 +331,24 @@ def _fmt(row: dict, key: str, spec: str) -> str:
     return format(row[key], spec) if key in row else "-".rjust(width)
 
 
+def _err(row: dict, width: int) -> str:
+    return f"{row.get('error', '-')[:width]:>{width}}"
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--cases", default=",".join(CASES),
                         help=f"comma-separated, from {', '.join(CASES)}")
     parser.add_argument("--modes", type=int, default=50, help="lowest modes to compute")
-    parser.add_argument("--timeout", type=float, default=300.0, help="seconds per stage")
+    parser.add_argument("--timeout", type=float, default=120.0, help="seconds per stage")
     parser.add_argument("--mem-limit", type=float, default=8.0,
                         help="address-space limit per stage, GiB")
+    parser.add_argument("--reduced-nodes", type=int, default=REDUCED_NODES,
+                        help="3D: nodes of the reduced model")
+    parser.add_argument("--reference-up-to", type=int, default=1000,
+                        help="2D: run the dense transcription up to this many nodes")
+    parser.add_argument("--no-reduced-check", action="store_true",
+                        help="skip the reduced-against-full 3D comparison")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--case", help=argparse.SUPPRESS)
     parser.add_argument("--stage", help=argparse.SUPPRESS)
@@ -160,32 +362,69 @@ def main(argv=None) -> int:
     if unknown:
         parser.error(f"unknown case(s) {sorted(unknown)}; choose from {list(CASES)}")
     n = args.modes
-    header = (f"{'case':>8} {'nodes':>7} {'nbrs':>5} {'nnz K_g':>10} {'build s':>8} "
-              f"{'modes s':>8} {'peak MB':>8} | {'dense s':>8} {'peak MB':>8} | "
-              f"{'freq diff':>9} {'1-min cos':>9} {'gap n':>7}")
-    print(header)
+    print(f"# {n} modes; peak = child's max RSS, MB; timeout {args.timeout:.0f} s and "
+          f"{args.mem_limit:g} GiB address space per stage")
+    print(f"{'case':>7} {'nodes':>6} {'model':>5} {'build s':>7} {'modes s':>7} "
+          f"{'eval s':>6} {'peak':>5} | {'dense s':>7} {'peak':>5} {'fdiff':>7} "
+          f"{'1-cos':>7} | {'match s':>7} {'peak':>5} {'pairs':>6} {'err50':>5} "
+          f"{'err90':>5} | {'morph s':>7} {'peak':>5} {'steps':>5} {'conv':>5} | "
+          f"{'ref s':>6} {'speedup':>7}")
     with tempfile.TemporaryDirectory() as tmp:
         for case in cases:
             kind, m = CASES[case]
-            sp_out, de_out = Path(tmp, f"{case}-s.npz"), Path(tmp, f"{case}-d.npz")
-            sp = run_stage(case, "model", n, sp_out, args.timeout, args.mem_limit)
-            de = {}
+            md = run_stage(case, "model", args, tmp)
+            de, ag = {}, {}
             if kind == "hand" and m <= DENSE_UP_TO:
-                de = run_stage(case, "dense", n, de_out, args.timeout, args.mem_limit)
-            ag = {}
-            if "error" not in sp and de and "error" not in de:
-                ag = agreement(points_for(case), de_out, sp_out, n)
-                ag["angle"] = 1 - ag["min_cosine"]
-            sp_t = f"{sp['build_s']:8.2f} {sp['modes_s']:8.2f}" if "error" not in sp else \
-                f"{sp['error']:>17}"
-            de_t = (f"{de['build_s'] + de['modes_s']:8.2f}" if de and "error" not in de else
-                    f"{de.get('error', '-'):>8}")
-            print(f"{case:>8} {m:7d} {_fmt(sp, 'pairs_per_node', '5.0f')} "
-                  f"{_fmt(sp, 'nnz_Kg', '10d')} {sp_t} {_fmt(sp, 'peak_mb', '8.0f')} | "
-                  f"{de_t} {_fmt(de, 'peak_mb', '8.0f')} | "
-                  f"{_fmt(ag, 'freq_rel_diff', '9.1e')} "
-                  f"{_fmt(ag, 'angle', '9.1e')} "
-                  f"{_fmt(ag, 'gap_after_n', '7.1e')}", flush=True)
+                de = run_stage(case, "dense", args, tmp)
+                if "error" not in md and "error" not in de:
+                    ag = agreement(case, Path(tmp, f"{case}-dense.npz"),
+                                   Path(tmp, f"{case}-model.npz"), n)
+                    ag["angle"] = 1 - ag["min_cosine"]
+            ma = run_stage(case, "match", args, tmp)
+            mo = run_stage(case, "morph", args, tmp)
+            ref = {}
+            if kind == "hand" and m <= args.reference_up_to and "error" not in mo:
+                ref = run_stage(case, "reference", args, tmp)
+            md_t = (f"{md['build_s']:7.2f} {md['modes_s']:7.2f} "
+                    f"{_fmt(md, 'eval_s', '6.2f')}" if "error" not in md else _err(md, 22))
+            de_t = (f"{de['build_s'] + de['modes_s']:7.2f}" if de and "error" not in de
+                    else _err(de, 7))
+            ma_t = f"{ma['match_s']:7.2f}" if "error" not in ma else _err(ma, 7)
+            mo_t = (f"{mo['morph_s']:7.2f}" if "error" not in mo else _err(mo, 7))
+            steps = (f"{mo['steps']:4d}{'*' if mo['truth_pairs'] else ' '}"
+                     if "steps" in mo else "    -")
+            conv = f"{str(mo['converged']):>5}" if "converged" in mo else "    -"
+            speed = "      -      -"
+            if ref and "error" not in ref and "error" not in ma:
+                t_ref = ref["ref_match_s"] + ref["ref_morph_s"]
+                speed = f"{t_ref:6.1f} {t_ref / (ma['match_s'] + mo['morph_s']):6.1f}x"
+            elif ref:
+                speed = _err(ref, 14)
+            print(f"{case:>7} {m:6d} {_fmt(md, 'model_nodes', '5d')} {md_t} "
+                  f"{_fmt(md, 'peak_mb', '5.0f')} | {de_t} {_fmt(de, 'peak_mb', '5.0f')} "
+                  f"{_fmt(ag, 'freq_rel_diff', '7.1e')} {_fmt(ag, 'angle', '7.1e')} | "
+                  f"{ma_t} {_fmt(ma, 'peak_mb', '5.0f')} {_fmt(ma, 'pairs', '6d')} "
+                  f"{_fmt(ma, 'err50', '5.1f')} {_fmt(ma, 'err90', '5.1f')} | "
+                  f"{mo_t} {_fmt(mo, 'peak_mb', '5.0f')} {steps} {conv} | {speed}",
+                  flush=True)
+        if not args.no_reduced_check and any(CASES[c][0] == "ellipsoid" for c in cases):
+            ck = run_stage("3d-10k", "check", args, tmp)
+            print(f"\n# 3D reduced route against the full sparse model, {CHECK_NODES} "
+                  f"nodes, lowest {n} modes (peak {_fmt(ck, 'peak_mb', '5.0f')} MB)")
+            if "error" in ck:
+                print(f"  {ck['error']}")
+            else:
+                print(f"{'reduced':>7} {'full s':>6} {'red. s':>6} {'f1 diff':>7} "
+                      f"{'max fdiff':>9} {'ratio diff':>10} {'1-cos 10':>8} "
+                      f"{'1-cos n':>8} {'gap n':>6}")
+                for r in ck["rows"]:
+                    print(f"{r['nodes']:7d} {r['full_s']:6.1f} {r['reduced_s']:6.1f} "
+                          f"{r['freq_diff1']:+7.1%} {r['freq_diff']:9.1%} "
+                          f"{r['ratio_diff']:10.1%} {r['angle10']:8.1e} {r['angle']:8.1e} "
+                          f"{r['gap']:6.1e}")
+    print("# err50/err90: pair error against the ground truth, median and 90th percentile "
+          "(2D: rows of the 1590-row hands; 3D: target node spacings); steps*: morph ran "
+          "on the ground-truth pairs because matching failed")
     return 0
 
 
