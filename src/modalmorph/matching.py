@@ -498,7 +498,8 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: flo
     Both objects are matched on ``coarse`` nodes spread evenly over them; every source
     node is then carried by the fitted similarity and deformation of its nearest coarse
     nodes (inverse-distance weights) and paired with the target node nearest to where it
-    lands (k-d trees); pairs farther than ``sqrt(reject)`` target spacings are dropped.
+    lands (k-d trees); pairs farther than ``sqrt(reject)`` coarse target spacings are
+    dropped.
     The correspondence is as good as the coarse one: within about one coarse spacing
     along a contour, not one node of the dense sampling.
     """
@@ -512,7 +513,8 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: flo
     landed = src.points + np.einsum("ik,ikd->id", w, (landed_c - sub_s.points)[near])
     j = cKDTree(tgt.points).query(landed)[1]
     gap = np.linalg.norm(tgt.points[j] - landed, axis=1)
-    cost = (gap / (tgt.spacing * tgt.size)) ** 2  # in squared target node spacings
+    h = tgt.spacing * tgt.size * tgt.m / len(cj)  # the coarse target's node spacing
+    cost = (gap / h) ** 2  # in squared coarse target spacings, as on the coarse level
     keep = cost <= reject
     pairs = np.c_[np.flatnonzero(keep), j[keep]]
     return pairs, cost[keep], align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]])

@@ -22,6 +22,8 @@ log = logging.getLogger(__name__)
 # Modes superposed by default for large objects (sparse solver), where all modes would
 # need a dense eigenproblem: the lowest ones carry the smooth part of the deformation.
 SPARSE_MODES = 100
+# Equilibrium also when the mean distance gained less than 0.1 % over this many steps.
+_STALL = 5
 
 
 class MorphDivergedError(ArithmeticError):
@@ -92,7 +94,7 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
           modes: int | float | None = None, solver: str = "auto", model_nodes: int = 300,
           scheme: str = "implicit", tol: float = 0.005,
           tol_distance: float | None = None, max_steps: int = 100,
-          equilibrium_tol: float = 1e-7, neighbours: int = 6,
+          equilibrium_tol: float = 1e-5, neighbours: int = 6,
           progress: Callable[[int, float], None] | None = None) -> Morph:
     """Estimate the intermediate shapes that take ``source`` into ``target``.
 
@@ -161,7 +163,9 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
     max_steps : int, optional
         Maximum number of time steps.
     equilibrium_tol : float, optional
-        Stop when no node moves by more than this fraction of the source's size in a step.
+        Stop when no node moves by more than this fraction of the source's size in a step,
+        or when the mean distance has changed by less than 0.1 % over 5 steps: the loads
+        and the elastic forces balance short of the tolerance. 0 disables both.
     neighbours : int, optional
         For unordered 3D objects: how many matched neighbours pull an unmatched node.
     progress : callable, optional
@@ -298,8 +302,9 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
             progress(step, dist[-1] * size)
         if dist[-1] <= tol_n:
             reason = "tolerance"
-        elif moved <= equilibrium_tol:
-            reason = "equilibrium"
+        elif moved <= equilibrium_tol or (equilibrium_tol > 0 and step > _STALL and abs(
+                dist[-1 - _STALL] - dist[-1]) <= 1e-3 * dist[-1]):
+            reason = "equilibrium"  # at rest, or the distance no longer decreases
         elif step == max_steps:
             reason = "max_steps"
 
