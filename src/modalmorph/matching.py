@@ -31,7 +31,7 @@ from scipy.spatial import cKDTree
 
 from .align import Similarity, align
 from .element import FEModel, gram_entries
-from .shape import Shape, as_shape, resample
+from .shape import Shape, as_shape, resample, spread_indices
 
 __all__ = ["Matching", "match", "modal_features", "affinity", "METHODS"]
 
@@ -102,25 +102,6 @@ class Matching:
 # --------------------------------------------------------------------------- modal model
 
 
-def _model_subset(shape: Shape, max_nodes: int) -> np.ndarray:
-    """Indices of at most ``max_nodes`` nodes spread evenly (along the order if ordered)."""
-    m = shape.m
-    if m <= max_nodes:
-        return np.arange(m)
-    if shape.ordered:
-        return np.unique(np.linspace(0, m, max_nodes, endpoint=not shape.closed)
-                         .astype(np.intp) % m)
-    # unordered: farthest-point sampling from the node nearest the centroid (deterministic)
-    x = shape.normalized
-    chosen = [int(np.argmin(np.sum(x**2, axis=1)))]
-    dist = np.sum((x - x[chosen[0]]) ** 2, axis=1)
-    for _ in range(max_nodes - 1):
-        k = int(np.argmax(dist))
-        chosen.append(k)
-        dist = np.minimum(dist, np.sum((x - x[k]) ** 2, axis=1))
-    return np.sort(np.array(chosen, dtype=np.intp))
-
-
 def modal_features(shape, n_modes: int, *, sigma: float = DEFAULT_SIGMA,
                    max_nodes: int = MAX_MODEL_NODES) -> tuple[np.ndarray, np.ndarray]:
     """The lowest modes of an object, one row per node, made comparable between objects.
@@ -156,7 +137,7 @@ def modal_features(shape, n_modes: int, *, sigma: float = DEFAULT_SIGMA,
         model_shape = Shape(resample(shape.points, min(shape.m, max_nodes),
                                      closed=shape.closed), closed=shape.closed)
     else:
-        subset = _model_subset(shape, max_nodes)
+        subset = spread_indices(shape, max_nodes)
         model_shape = shape if len(subset) == shape.m else Shape(
             shape.points[subset], closed=shape.closed, ordered=shape.ordered)
     model = FEModel(model_shape, sigma=sigma)
@@ -419,7 +400,7 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
     h2 = tgt.spacing**2
 
     # pose search on a coarse subset: every candidate rotation, both target directions
-    ci, cj = _model_subset(src, _COARSE_NODES), _model_subset(tgt, _COARSE_NODES)
+    ci, cj = spread_indices(src, _COARSE_NODES), spread_indices(tgt, _COARSE_NODES)
     hc2 = h2 * (n / len(cj)) ** 2
     rots = _rotations(d, x, y)
     z = np.einsum("rab,ib->ria", rots, x[ci])
@@ -503,7 +484,7 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: flo
     The correspondence is as good as the coarse one: within about one coarse spacing
     along a contour, not one node of the dense sampling.
     """
-    ci, cj = _model_subset(src, coarse), _model_subset(tgt, coarse)
+    ci, cj = spread_indices(src, coarse), spread_indices(tgt, coarse)
     sub_s = Shape(src.points[ci], closed=src.closed, ordered=src.ordered)
     sub_t = Shape(tgt.points[cj], closed=tgt.closed, ordered=tgt.ordered)
     *_, landed_c = _match_auto(sub_s, sub_t, n_modes, sigma, reject)

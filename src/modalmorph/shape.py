@@ -8,7 +8,7 @@ from functools import cached_property
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["Shape", "as_shape", "coarsen", "resample"]
+__all__ = ["Shape", "as_shape", "coarsen", "resample", "spread_indices"]
 
 # Two nodes closer than this fraction of the object's RMS radius are "the same node".
 _REPEAT_TOL = 1e-9
@@ -178,18 +178,17 @@ def resample(points, n: int, *, closed: bool = True) -> np.ndarray:
     return np.column_stack([np.interp(t, s, path[:, a]) for a in range(pts.shape[1])])
 
 
-def coarsen(shape: Shape, n: int) -> Shape:
-    """At most ``n`` nodes spread evenly over a shape, for a reduced physical model.
+def spread_indices(shape: Shape, n: int) -> np.ndarray:
+    """Indices of at most ``n`` nodes spread evenly over a shape, ascending.
 
-    Ordered contours are resampled by arc length (:func:`resample`); unordered point sets
-    and surfaces keep a subset of their nodes chosen by farthest-point sampling from the
-    node nearest the centroid (deterministic). A shape with at most ``n`` nodes is
-    returned as it is.
+    Ordered shapes: evenly along the order. Unordered point sets: farthest-point sampling
+    from the node nearest the centroid (deterministic).
     """
-    if shape.m <= n:
-        return shape
+    m = shape.m
+    if m <= n:
+        return np.arange(m)
     if shape.ordered:
-        return Shape(resample(shape.points, n, closed=shape.closed), closed=shape.closed)
+        return np.unique(np.linspace(0, m, n, endpoint=not shape.closed).astype(np.intp) % m)
     x = shape.normalized
     chosen = np.empty(n, dtype=np.intp)
     chosen[0] = np.argmin(np.sum(x**2, axis=1))
@@ -197,4 +196,18 @@ def coarsen(shape: Shape, n: int) -> Shape:
     for i in range(1, n):
         chosen[i] = np.argmax(dist)
         dist = np.minimum(dist, np.sum((x - x[chosen[i]]) ** 2, axis=1))
-    return Shape(shape.points[np.sort(chosen)], ordered=False)
+    return np.sort(chosen)
+
+
+def coarsen(shape: Shape, n: int) -> Shape:
+    """At most ``n`` nodes spread evenly over a shape, for a reduced physical model.
+
+    Ordered contours are resampled by arc length (:func:`resample`); unordered point sets
+    and surfaces keep the subset :func:`spread_indices` chooses. A shape with at most
+    ``n`` nodes is returned as it is.
+    """
+    if shape.m <= n:
+        return shape
+    if shape.ordered:
+        return Shape(resample(shape.points, n, closed=shape.closed), closed=shape.closed)
+    return Shape(shape.points[spread_indices(shape, n)], ordered=False)
