@@ -225,30 +225,43 @@ def _monotone(C: np.ndarray, skip: float, repeat: float = np.inf
     arg = np.empty((m, *batch, n), np.intp)
     again = np.zeros((m, *batch, n), bool)
     idx = np.arange(n)
+    prev = np.empty((*batch, n))
+    run = np.empty((*batch, n))
+    repeats = np.isfinite(repeat)
     for i in range(m):
         # previous target < j; before target 0 every earlier row was skipped
-        prev = np.concatenate([np.full((*batch, 1), skip * i), F[..., :-1]], axis=-1)
-        if np.isfinite(repeat) and i > 0:
-            again[i] = F + repeat < prev  # or previous target == j, at a price
-            prev = np.where(again[i], F + repeat, prev)
-        T = C[..., i, :] + prev
-        run = np.minimum.accumulate(T, axis=-1)
-        arg[i] = np.maximum.accumulate(np.where(run == T, idx, 0), axis=-1)
+        prev[..., 0] = skip * i
+        prev[..., 1:] = F[..., :-1]
+        if repeats and i > 0:
+            reuse = F + repeat
+            np.less(reuse, prev, out=again[i])  # or previous target == j, at a price
+            np.minimum(reuse, prev, out=prev)
+        T = np.add(C[..., i, :], prev, out=prev)
+        np.minimum.accumulate(T, axis=-1, out=run)
+        np.maximum.accumulate(np.where(run == T, idx, 0), axis=-1, out=arg[i])
         skipped = F + skip
-        took[i] = run < skipped
-        F = np.minimum(run, skipped)
+        np.less(run, skipped, out=took[i])
+        np.minimum(run, skipped, out=F)
     # backtrack, the batch flattened so that plain fancy indexing picks one entry per problem
     b = int(np.prod(batch, dtype=np.intp))
     took, arg, again = (a.reshape(m, b, n) for a in (took, arg, again))
-    rows = np.arange(b)
     j = np.full((m, b), -1, np.intp)
-    cur = np.full(b, n - 1, np.intp)
-    for i in range(m - 1, -1, -1):
-        c = np.maximum(cur, 0)
-        t = took[i, rows, c] & (cur >= 0)
-        a = arg[i, rows, c]
-        j[i] = np.where(t, a, -1)
-        cur = np.where(t, np.where(again[i, rows, a], a, a - 1), cur)
+    if b == 1:  # one problem: scalar steps are faster than fancy indexing
+        cur = n - 1
+        for i in range(m - 1, -1, -1):
+            if cur >= 0 and took[i, 0, cur]:
+                a = arg[i, 0, cur]
+                j[i, 0] = a
+                cur = a if again[i, 0, a] else a - 1
+    else:
+        rows = np.arange(b)
+        cur = np.full(b, n - 1, np.intp)
+        for i in range(m - 1, -1, -1):
+            c = np.maximum(cur, 0)
+            t = took[i, rows, c] & (cur >= 0)
+            a = arg[i, rows, c]
+            j[i] = np.where(t, a, -1)
+            cur = np.where(t, np.where(again[i, rows, a], a, a - 1), cur)
     j = j.T.reshape(*batch, m)
     return j, F[..., -1]
 
