@@ -229,15 +229,15 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
     X1 = reduced.to_normalized(work.points)  # everything in the model's normalised frame
     Y = reduced.to_normalized(tgt.points)
     if reduced is work:
-        Phi, spread = md.shapes, None
+        Phi, spread = _Field(md.shapes, d), None
     else:  # modes at every node: u(x) = sum_k g_k(x) psi_k (1)-(4), truncated like G
-        Phi = model.modes_at(md, X1)
         g_eval = model.field(X1)
+        Phi = _Field(md.gaussian, d, g_eval)
         spread = g_eval / g_eval.sum(axis=0)  # each model node's energy over the nodes
     loads_rule = LoadTargets(X1, Y, pairs, ordered=bool(work.ordered), closed=work.closed,
                              target_closed=tgt.closed, neighbours=neighbours)
 
-    PtP = Phi.T @ Phi
+    PtP = Phi.gram()
     K_mod = np.diag(w2) + (k_abs * PtP if scheme == "implicit" else 0.0)
     w_lo, w_hi = _frequency_range(K_mod)
     a_r, b_r = rayleigh(*damping, w_lo, w_hi)
@@ -269,25 +269,24 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
     if c_x == 0:
         x = np.zeros(len(w2))
     else:
-        x = MPhi.T @ U0 if spread is None else np.linalg.lstsq(Phi, U0, rcond=None)[0]
+        x = MPhi.T @ U0 if spread is None else np.linalg.lstsq(Phi.dense(), U0, rcond=None)[0]
     v = c_v * x  # (18)
-    f_const = k_abs * (Phi.T @ flat(T0 - X1))
-    f = f_const - (0.0 if scheme == "implicit" else k_abs * (Phi.T @ U0))
+    f = k_abs * Phi.tdot(flat(T0 - X1) - (0.0 if scheme == "implicit" else U0))
     a = f - C_mod @ v - K_mod @ x
     record(np.zeros_like(x), X1, T0)
     d0 = dist[0]
     reason = "tolerance" if d0 <= tol_n else None
-    current = X1 + nodes(Phi @ x)
+    current = X1 + nodes(Phi.dot(x))
     T = loads_rule.targets(current)  # weights of (20) from the current shape
     step = 0
     while reason is None:
         step += 1
         if scheme == "implicit":  # R = k (T - X1 - U_new): the U_new part is in K_mod
-            f = k_abs * (Phi.T @ flat(T - X1))
+            f = k_abs * Phi.tdot(flat(T - X1))
         else:  # (19) evaluated at the previous shape
-            f = k_abs * (Phi.T @ flat(T - current))
+            f = k_abs * Phi.tdot(flat(T - current))
         x_new, v, a = integrator.step(x, v, a, f)
-        new = X1 + nodes(Phi @ x_new)
+        new = X1 + nodes(Phi.dot(x_new))
         moved = np.abs(new - current).max()
         x, current = x_new, new
         if not np.all(np.isfinite(x)) or _mean_distance(current, Y, pairs) > 10 * max(d0, 1):
@@ -325,6 +324,42 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
                  node_energy=np.array(e_node), mean_distance=np.array(dist) * size,
                  matching=matching, similarity=similarity, converged=converged,
                  stop_reason=stop, source=src, target=tgt, params=params)
+
+
+class _Field:
+    """The modes at every node, ``Phi = (I_d kron g) B``, applied without forming Phi.
+
+    ``B`` (d*mc, n) is the modal basis at the model's nodes (``Phi`` itself, then ``g`` is
+    None) or in the Gaussian basis (``psi``, with ``g`` the sparse (m, mc) field matrix of a
+    reduced model, :meth:`FEModel.field`). Memory stays that of ``g`` and ``B``.
+    """
+
+    def __init__(self, basis: np.ndarray, d: int, g=None):
+        self.B = basis.reshape(d, -1, basis.shape[1])
+        self.g = g
+
+    def dot(self, x: np.ndarray) -> np.ndarray:
+        """``Phi x``, (d*m,)."""
+        parts = [b @ x for b in self.B]
+        return np.concatenate(parts if self.g is None else [self.g @ p for p in parts])
+
+    def tdot(self, v: np.ndarray) -> np.ndarray:
+        """``Phi^T v`` for v (d*m,)."""
+        v = v.reshape(len(self.B), -1)
+        if self.g is not None:
+            v = [self.g.T @ va for va in v]
+        return sum(b.T @ va for b, va in zip(self.B, v, strict=True))
+
+    def gram(self) -> np.ndarray:
+        """``Phi^T Phi``, (n, n)."""
+        if self.g is None:
+            return sum(b.T @ b for b in self.B)
+        gtg = (self.g.T @ self.g).tocsr()
+        return sum(b.T @ (gtg @ b) for b in self.B)
+
+    def dense(self) -> np.ndarray:
+        """``Phi`` itself, (d*m, n)."""
+        return np.concatenate([b if self.g is None else self.g @ b for b in self.B])
 
 
 def _frequency_range(K_mod):
