@@ -50,6 +50,7 @@ COARSE = 1000
 MAX_AFFINITY = 4e7  # larger objects are modelled on an evenly spread subset of nodes
 _COARSE_NODES = 64  # resolution of the pose search of the default method
 _ANGLES = 24  # rotations tried by the pose search in 2D
+_POSE_BATCH = 4  # rotations searched at once by the branch and bound of the pose search
 
 
 @dataclass(frozen=True, eq=False)
@@ -422,12 +423,23 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
          - 2 * np.einsum("ria,ja->rij", z, yc)) / hc2
     C = D + F[np.ix_(ci, cj)]
     if ordered:
-        Cb = np.concatenate([C, C[:, :, ::-1]])  # forward, then reversed target order
-        j, total = _ordered_pairs(Cb, closed, opt["skip"],
-                                  opt["repeat"] if len(ci) > len(cj) else np.inf)
-        best = int(np.argmin(total))
-        reverse = best >= len(rots)
-        jj = j[best]
+        repeat = opt["repeat"] if len(ci) > len(cj) else np.inf
+        # branch and bound over the rotations: an order-preserving total is at least the
+        # sum of each row's cheapest choice, so rotations are searched best bound first
+        # and the search stops once no bound left can beat the best total found
+        bound = np.minimum(C.min(axis=2), opt["skip"]).sum(axis=1)
+        ranked = np.argsort(bound)
+        best_total, best = np.inf, None
+        for start in range(0, len(ranked), _POSE_BATCH):
+            if bound[ranked[start]] >= best_total:
+                break
+            r = ranked[start:start + _POSE_BATCH]
+            Cb = np.concatenate([C[r], C[r][:, :, ::-1]])  # forward, reversed target order
+            j, total = _ordered_pairs(Cb, closed, opt["skip"], repeat)
+            k = int(np.argmin(total))
+            if total[k] < best_total:
+                best_total, best = total[k], (j[k], k >= len(r))
+        jj, reverse = best
         keep = jj >= 0
         if reverse:
             jj = len(cj) - 1 - jj
