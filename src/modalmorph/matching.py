@@ -46,6 +46,8 @@ MAX_MODEL_NODES = 160
 # Objects with more nodes are matched on COARSE nodes, then refined (linear memory).
 LARGE = 2000
 COARSE = 1000
+# The matcher's alternation of search and fits runs on at most this many source nodes.
+ALTERNATION_NODES = 400
 # Largest m x n affinity matrix the paper's local/global searches may build.
 MAX_AFFINITY = 4e7  # larger objects are modelled on an evenly spread subset of nodes
 _COARSE_NODES = 64  # resolution of the pose search of the default method
@@ -397,6 +399,17 @@ _AUTO = dict(skip=_SKIP, sig_weight=_SIG_WEIGHT, width=_SIG_WIDTH, rigid=_RIGID,
              dense=0.95, repeat=_REPEAT)
 
 
+def _search(z, yo, Fo, h2, rows, ordered, closed, skip, repeat, many_to_one):
+    """Pairs (row index, target index) for the source nodes ``rows`` placed at ``z``, and
+    the cost matrix: order-preserving for contours, an assignment for point sets."""
+    C = _sq_dist(z[rows], yo) / h2 + Fo[rows]
+    if ordered:
+        j, _ = _ordered_pairs(C, closed, skip, repeat)
+        return _pairs_from_j(j, C, one_to_one=not many_to_one), C
+    r, c = linear_sum_assignment(C)
+    return np.c_[r, c], C
+
+
 def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: float,
                 options: dict | None = None
                 ) -> tuple[np.ndarray, np.ndarray, Similarity, np.ndarray]:
@@ -464,18 +477,19 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
         metric = np.eye(d) - (1 - np.sqrt(opt["tangential"])) * t[:, :, None] * t[:, None, :]
     shift = np.zeros_like(x)
     previous = None
+    # the alternation runs on at most ALTERNATION_NODES source nodes; the final search,
+    # with the fitted similarity and deformation, on all of them
+    sub = spread_indices(src, ALTERNATION_NODES)
+    sub_denser = src.spacing * src.m / len(sub) * sim.scale < opt["dense"] * tgt.spacing
     for it in range(opt["iterations"]):
         z = sim.apply(x) + shift
-        C = _sq_dist(z, yo) / h2 + Fo
-        if ordered:
-            j, _ = _ordered_pairs(C, closed, opt["skip"], repeat)
-            pairs = _pairs_from_j(j, C, one_to_one=not denser)
-        else:
-            r, c = linear_sum_assignment(C)
-            pairs = np.c_[r, c]
+        pairs, C = _search(z, yo, Fo, h2, sub, ordered, closed, opt["skip"],
+                           repeat if sub_denser else np.inf, sub_denser)
+        cost = C[pairs[:, 0], pairs[:, 1]]
+        pairs = np.c_[sub[pairs[:, 0]], pairs[:, 1]]
         if it == opt["iterations"] - 1:
             break
-        good = pairs[C[pairs[:, 0], pairs[:, 1]] <= opt["trust"]]
+        good = pairs[cost <= opt["trust"]]
         if len(good) < max(d + 1, len(pairs) // 4):  # too few trusted: use them all
             good = pairs
         # the fits depend on the trusted pairs alone: the same ones twice running, fitted
@@ -489,6 +503,9 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
             resid = yo[good[:, 1]] - sim.apply(x[rows])
             shift = _modal_deformation(phi1, w1, sim.rotation, rows, resid, opt["stiff"],
                                        metric[good[:, 1]] if ordered else None)
+    if len(sub) < src.m:
+        pairs, C = _search(z, yo, Fo, h2, np.arange(src.m), ordered, closed, opt["skip"],
+                           repeat, denser)
     cost = C[pairs[:, 0], pairs[:, 1]]
     keep = cost <= reject
     pairs, cost = pairs[keep], cost[keep]
