@@ -58,12 +58,10 @@ class LoadTargets:
         self.partner = np.full(m, -1)
         self.partner[pairs[:, 0]] = pairs[:, 1]
         un = np.flatnonzero(~self.matched)
-        # For each unmatched node: candidate target indices (ragged -> padded) or carriers.
-        self._mode = "ordered" if ordered else "cloud"
+        # For each unmatched node: its candidate target nodes (20), or its carriers.
         if un.size == 0:
             self._groups = []
-            return
-        if ordered:
+        elif ordered:
             self._groups = self._contour_candidates(un, closed, target_closed, len(target))
         else:
             k = min(neighbours, int(self.matched.sum()))
@@ -71,6 +69,7 @@ class LoadTargets:
             _, nb = cKDTree(source[idx_matched]).query(source[un], k=k)
             nb = idx_matched[np.asarray(nb).reshape(len(un), k)]
             self._groups = [("carry", un, nb)]
+        self._flatten()
 
     def _contour_candidates(self, un, closed, target_closed, n):
         midx = np.flatnonzero(self.matched)
@@ -96,19 +95,38 @@ class LoadTargets:
             groups.append(("carry", np.asarray(carry_nodes), np.asarray(carry_from)[:, None]))
         return groups
 
+    def _flatten(self):
+        """Flat (node, candidate) lists of the (20) groups, and the fixed targets of the
+        nodes that move with their matched neighbours (they depend on the source only)."""
+        mean = [(nodes, cand) for kind, nodes, cand in self._groups if kind == "mean"]
+        node_of = [np.repeat(nodes, len(cand)) for nodes, cand in mean]
+        cand_of = [np.tile(cand, len(nodes)) for nodes, cand in mean]
+        self._node_of = np.concatenate(node_of) if mean else np.zeros(0, np.intp)
+        self._cand_of = np.concatenate(cand_of) if mean else np.zeros(0, np.intp)
+        self._mean_nodes, self._seg = np.unique(self._node_of, return_inverse=True)
+        self._fixed = []
+        for kind, nodes, cand in self._groups:
+            if kind == "carry":  # where the matched neighbours' displacements take the node
+                disp = self.target[self.partner[cand]] - self.source[cand]  # (b, k, d)
+                D = np.linalg.norm(self.source[nodes, None, :] - self.source[cand], axis=2)
+                self._fixed.append((nodes, self.source[nodes] + _weighted_mean(D, disp)))
+
     def targets(self, current: np.ndarray) -> np.ndarray:
         """Target position of every node for the current shape ``current`` (m, d)."""
         out = current.copy()
         out[self.matched] = self.target[self.partner[self.matched]]  # (19)
-        for kind, nodes, cand in self._groups:
-            if kind == "mean":  # (20), normalised weights
-                pts = self.target[cand]  # (c, d)
-                D = np.linalg.norm(current[nodes, None, :] - pts[None], axis=2)  # (b, c)
-                out[nodes] = _weighted_mean(D, pts[None])
-            else:  # where the matched neighbours' displacements would take the node
-                disp = self.target[self.partner[cand]] - self.source[cand]  # (b, k, d)
-                D = np.linalg.norm(self.source[nodes, None, :] - self.source[cand], axis=2)
-                out[nodes] = self.source[nodes] + _weighted_mean(D, disp)
+        if self._node_of.size:  # (20), weights D_tot - D normalised to 1, all groups at once
+            seg, k = self._seg, len(self._mean_nodes)
+            pts = self.target[self._cand_of]
+            D = np.linalg.norm(current[self._node_of] - pts, axis=1)
+            w = np.bincount(seg, D, k)[seg] - D
+            total = np.bincount(seg, w, k)[seg]
+            count = np.bincount(seg, minlength=k)[seg]
+            w = np.where(total > 0, w / np.where(total > 0, total, 1), 1.0 / count)
+            out[self._mean_nodes] = np.column_stack(
+                [np.bincount(seg, w * pts[:, a], k) for a in range(pts.shape[1])])
+        for nodes, fixed in self._fixed:
+            out[nodes] = fixed
         return out
 
 
@@ -152,7 +170,10 @@ class Newmark:
         a1 = self.delta / (self.alpha * self.dt)
         n = self.K.shape[0]
         K_eff = self.K + a0 * np.eye(n) + a1 * self.C  # left side of (15)
-        object.__setattr__(self, "_factor", linalg.cho_factor(K_eff, check_finite=False))
+        # K_eff is SPD and well conditioned (a0 I dominates for small steps): its inverse,
+        # formed once, turns every step's solve into one matrix-vector product
+        factor = linalg.cho_factor(K_eff, check_finite=False)
+        object.__setattr__(self, "_inverse", linalg.cho_solve(factor, np.eye(n)))
 
     def step(self, x, v, a, f):
         """One step: state (x, v, a) at t and load f at t + dt -> state at t + dt."""
@@ -161,7 +182,7 @@ class Newmark:
         a2, a3 = 1 / (al * dt), 1 / (2 * al) - 1
         a4, a5 = de / al - 1, dt / 2 * (de / al - 2)
         rhs = f + (a0 * x + a2 * v + a3 * a) + self.C @ (a1 * x + a4 * v + a5 * a)  # (15)
-        x1 = linalg.cho_solve(self._factor, rhs, check_finite=False)
+        x1 = self._inverse @ rhs
         a_new = a0 * (x1 - x) - a2 * v - a3 * a
         v1 = v + dt * ((1 - de) * a + de * a_new)  # (14)
         return x1, v1, a_new
