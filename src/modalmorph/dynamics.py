@@ -10,6 +10,9 @@ from scipy.spatial import cKDTree
 
 __all__ = ["Newmark", "LoadTargets", "check_newmark"]
 
+# Groups of (20) with at most this many (node, candidate) pairs share one vectorised pass.
+_SMALL_GROUP = 256
+
 
 def check_newmark(alpha: float, delta: float) -> None:
     """Refuse Newmark parameters outside the unconditionally stable range (14).
@@ -98,7 +101,12 @@ class LoadTargets:
     def _flatten(self):
         """Flat (node, candidate) lists of the (20) groups, and the fixed targets of the
         nodes that move with their matched neighbours (they depend on the source only)."""
-        mean = [(nodes, cand) for kind, nodes, cand in self._groups if kind == "mean"]
+        # small groups go through one vectorised pass, large ones (long unmatched runs)
+        # one by one, which keeps their (nodes x candidates) work in dense blocks
+        mean = [(nodes, cand) for kind, nodes, cand in self._groups
+                if kind == "mean" and len(nodes) * len(cand) <= _SMALL_GROUP]
+        self._large = [(nodes, cand) for kind, nodes, cand in self._groups
+                       if kind == "mean" and len(nodes) * len(cand) > _SMALL_GROUP]
         node_of = [np.repeat(nodes, len(cand)) for nodes, cand in mean]
         cand_of = [np.tile(cand, len(nodes)) for nodes, cand in mean]
         self._node_of = np.concatenate(node_of) if mean else np.zeros(0, np.intp)
@@ -125,6 +133,10 @@ class LoadTargets:
             w = np.where(total > 0, w / np.where(total > 0, total, 1), 1.0 / count)
             out[self._mean_nodes] = np.column_stack(
                 [np.bincount(seg, w * pts[:, a], k) for a in range(pts.shape[1])])
+        for nodes, cand in self._large:
+            pts = self.target[cand]  # (c, d)
+            D = np.linalg.norm(current[nodes, None, :] - pts[None], axis=2)  # (b, c)
+            out[nodes] = _weighted_mean(D, pts[None])
         for nodes, fixed in self._fixed:
             out[nodes] = fixed
         return out
