@@ -4,7 +4,7 @@ Cases: pairs of objects at 1k, 4k, 16k and 64k nodes (2D contours) and 10k and 1
 (3D point sets), each a source and a different target:
 
 - 2D: the bundled hands 0 and 3, both resampled at the same ``m`` contour parameters
-  (linear interpolation between rows, as ``tests/test_pipeline.py::_dense_hands``). The
+  (linear interpolation between rows: ``modalmorph.datasets.load_hands``). The
   hands are in row correspondence, so node ``i`` of the source belongs with node ``i`` of
   the target: the ground truth (anatomical, fuzzy by some ten rows; see
   ``benchmarks/matching.py``).
@@ -77,7 +77,7 @@ from morph import reference, reference_match  # noqa: E402
 
 import modalmorph as mm  # noqa: E402
 from modalmorph import FEModel, Shape  # noqa: E402
-from modalmorph.datasets import load_hand  # noqa: E402
+from modalmorph.datasets import load_hand, load_hands  # noqa: E402
 from modalmorph.shape import coarsen  # noqa: E402
 
 CASES = {
@@ -98,12 +98,7 @@ CHECK_NODES = 2000  # 3D size where the full sparse model still runs (3000: out 
 
 def hands(m: int) -> tuple[np.ndarray, np.ndarray]:
     """Hands 0 and 3 at the same ``m`` contour parameters; row i belongs with row i."""
-    h0, h3 = load_hand(0), load_hand(3)
-    s = np.linspace(0, len(h0), m, endpoint=False)
-    i = np.floor(s).astype(int)
-    f = (s - i)[:, None]
-    nxt = (i + 1) % len(h0)
-    return h0[i] * (1 - f) + h0[nxt] * f, h3[i] * (1 - f) + h3[nxt] * f
+    return tuple(load_hands((0, 3), m))
 
 
 def blob(m: int) -> np.ndarray:

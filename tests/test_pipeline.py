@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from modalmorph.datasets import load_hand
+from modalmorph.datasets import load_hand, load_hands
 from modalmorph.pipeline import MorphDivergedError, morph
 
 from .conftest import self_intersections, sphere_points
@@ -178,13 +178,8 @@ def test_dimension_mismatch(rng):
 
 
 def _dense_hands(n):
-    """Hands 0 and 3 resampled at the same n contour parameters: ground-truth pairs."""
-    h0, h3 = load_hand(0), load_hand(3)
-    s = np.linspace(0, len(h0), n, endpoint=False)
-    i = np.floor(s).astype(int)
-    f = (s - i)[:, None]
-    nxt = (i + 1) % len(h0)
-    return h0[i] * (1 - f) + h0[nxt] * f, h3[i] * (1 - f) + h3[nxt] * f
+    """Hands 0 and 3 at the same n contour parameters: ground-truth pairs."""
+    return load_hands((0, 3), n)
 
 
 def test_reduced_model_for_large_contours():

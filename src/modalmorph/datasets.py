@@ -6,7 +6,7 @@ from importlib import resources
 
 import numpy as np
 
-__all__ = ["load_hand", "load_heart", "data_path"]
+__all__ = ["load_hand", "load_hands", "load_heart", "data_path"]
 
 _HEART = {
     "diastole": "SC-HF-I-07-IM-0001-0080-icontour-manual.csv",
@@ -33,6 +33,20 @@ def load_hand(i: int = 0) -> np.ndarray:
     if i not in range(8):
         raise ValueError(f"hand index must be 0-7, got {i}")
     return _read(data_path("hands", f"hand-{i}.csv"))
+
+
+def load_hands(indices=(0, 3), n: int = 1590) -> list[np.ndarray]:
+    """Several hands sampled at the same ``n`` contour parameters, each (n, 2).
+
+    Rows are interpolated linearly between the 1590 bundled rows, so row ``r`` of every
+    returned hand is still the same anatomical point: ground truth for matching and
+    morphing at any node count.
+    """
+    s = np.linspace(0, 1590, n, endpoint=False)
+    i = np.floor(s).astype(int)
+    f = (s - i)[:, None]
+    nxt = (i + 1) % 1590
+    return [h[i] * (1 - f) + h[nxt] * f for h in map(load_hand, indices)]
 
 
 def load_heart(phase: str = "diastole") -> np.ndarray:
