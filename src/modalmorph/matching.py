@@ -51,6 +51,7 @@ ALTERNATION_NODES = 400
 # Largest m x n affinity matrix the paper's local/global searches may build.
 MAX_AFFINITY = 4e7  # larger objects are modelled on an evenly spread subset of nodes
 _COARSE_NODES = 64  # resolution of the pose search of the default method
+_COARSE_NODES_CLOUD = 256  # the same for point sets, which have only 4 candidate poses
 _ANGLES = 24  # rotations tried by the pose search in 2D
 _POSE_BATCH = 4  # rotations searched at once by the branch and bound of the pose search
 
@@ -427,7 +428,8 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
     h2 = tgt.spacing**2
 
     # pose search on a coarse subset: every candidate rotation, both target directions
-    ci, cj = spread_indices(src, _COARSE_NODES), spread_indices(tgt, _COARSE_NODES)
+    coarse = _COARSE_NODES if ordered else _COARSE_NODES_CLOUD
+    ci, cj = spread_indices(src, coarse), spread_indices(tgt, coarse)
     hc2 = h2 * (n / len(cj)) ** 2
     rots = _rotations(d, x, y)
     z = np.einsum("rab,ib->ria", rots, x[ci])
