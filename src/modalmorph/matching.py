@@ -30,7 +30,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from .align import Similarity, align
-from .element import FEModel, gram_entries
+from .element import FEModel
 from .shape import Shape, as_shape, resample, spread_indices
 
 __all__ = ["Matching", "match", "modal_features", "affinity", "METHODS"]
@@ -147,14 +147,11 @@ def modal_features(shape, n_modes: int, *, sigma: float = DEFAULT_SIGMA,
     model = FEModel(model_shape, sigma=sigma)
     n_modes = min(int(n_modes), model.dim * model.m)
     modes = model.modes(n_modes)
-    d = shape.dim
     if model_shape is shape:
         phi = modes.node_shapes()
-    else:
-        x = model_shape.to_normalized(shape.points)
-        g, _ = gram_entries(model.points[None, :, :] - x[:, None, :], model.sigma)
-        psi = modes.gaussian.reshape(d, model.m, n_modes)
-        phi = np.einsum("ik,akn->ian", g, psi)  # u(x_i) = sum_k g_k(x_i) psi_k
+    else:  # u(x_i) = sum_k g_k(x_i) psi_k (1)-(4), at every node
+        at = model.modes_at(modes, model_shape.to_normalized(shape.points))
+        phi = at.reshape(shape.dim, shape.m, n_modes).transpose(1, 0, 2)
     rms = np.sqrt(np.mean(np.sum(phi**2, axis=1), axis=0))
     return phi / rms, modes.frequencies
 
