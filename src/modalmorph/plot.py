@@ -138,10 +138,6 @@ def _line_collection(segments, ax, **kw):
     return LineCollection(segments, **kw)
 
 
-def _polyline(points: np.ndarray, closed: bool) -> np.ndarray:
-    return np.vstack([points, points[:1]]) if closed else points
-
-
 def _finish(ax, points: np.ndarray):
     """Equal aspect, x/y(/z) labels, limits fitted to ``points`` (any (N, d))."""
     if _is_3d(ax):
