@@ -11,6 +11,7 @@ from modalmorph.matching import (
     Matching,
     _modal_deformation,
     _monotone,
+    _monotone_totals,
     _tangents,
     affinity,
     match,
@@ -210,11 +211,25 @@ def test_monotone_search_is_optimal():
             best = min(best, cost)
         return best
 
+    def path_cost(C, j, skip, repeat):
+        matched = np.flatnonzero(j >= 0)
+        steps = np.diff(j[matched])
+        assert np.all(steps >= 0)  # order preserved
+        assert np.isfinite(repeat) or np.all(steps > 0)  # one-to-one unless repeats allowed
+        reused = np.count_nonzero(steps == 0)
+        return (C[matched, j[matched]].sum() + skip * (len(j) - len(matched))
+                + (repeat * reused if reused else 0.0))
+
     for _ in range(60):
-        C = rng.random(tuple(rng.integers(1, 5, 2)))
+        C = np.round(rng.random(tuple(rng.integers(1, 5, 2))) * 4) / 4  # with ties
         for repeat in (np.inf, 0.3):
-            _, total = _monotone(C, 0.5, repeat)
+            j, total = _monotone(C, 0.5, repeat)
             assert abs(total - brute(C, 0.5, repeat)) < 1e-12  # exact optimum
+            assert abs(path_cost(C, j, 0.5, repeat) - total) < 1e-12  # ... and its path
+            batch = np.stack([C, C[::-1], 2 * C])  # the batched totals agree
+            expected = [_monotone(c, 0.5, repeat)[1] for c in batch]
+            np.testing.assert_allclose(_monotone_totals(batch, 0.5, repeat), expected,
+                                       rtol=0, atol=1e-12)
 
 
 def test_bad_input(hand90):

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import linalg
+from scipy.linalg import lapack
 from scipy.spatial import cKDTree
 
 __all__ = ["Newmark", "LoadTargets", "check_newmark"]
@@ -184,8 +184,13 @@ class Newmark:
         K_eff = self.K + a0 * np.eye(n) + a1 * self.C  # left side of (15)
         # K_eff is SPD and well conditioned (a0 I dominates for small steps): its inverse,
         # formed once, turns every step's solve into one matrix-vector product
-        factor = linalg.cho_factor(K_eff, check_finite=False)
-        object.__setattr__(self, "_inverse", linalg.cho_solve(factor, np.eye(n)))
+        L, info = lapack.dpotrf(K_eff, lower=1)
+        if info == 0:
+            inv, info = lapack.dpotri(L, lower=1)  # from the Cholesky factor, lower half
+        if info != 0:
+            raise ValueError("Newmark's effective stiffness is not positive definite: "
+                             "check the damping and the time step")
+        object.__setattr__(self, "_inverse", np.tril(inv) + np.tril(inv, -1).T)
 
     def step(self, x, v, a, f):
         """One step: state (x, v, a) at t and load f at t + dt -> state at t + dt."""

@@ -209,62 +209,69 @@ def _reject(cost: np.ndarray, factor: float) -> np.ndarray:
     return cost <= factor * max(float(np.median(cost)), 1e-12)
 
 
+def _forward(C: np.ndarray, skip: float, repeat: float, keep: bool):
+    """The dynamic programme of :func:`_monotone` over the rows of ``C`` (..., m, n).
+
+    Returns ``(F, T)``: ``F[i, ..., 1 + j]`` is the best cost of rows < i whose last
+    target is <= j (``F[i, ..., 0]``: every one of them skipped) and ``T[i, ..., j]`` the
+    best cost of rows <= i with row i matched to j. Within a row the best predecessor is a
+    running minimum (``np.minimum.accumulate``): a few vectorised O(n) operations per row.
+    With ``keep=False`` only two rows of ``F`` are kept (the last is ``F[m % 2]``) and
+    ``T`` is None.
+    """
+    *batch, m, n = C.shape
+    F = np.empty((m + 1 if keep else 2, *batch, n + 1))
+    T = np.empty((m if keep else 1, *batch, n))
+    F[0] = 0.0
+    repeats = np.isfinite(repeat)
+    prev = np.empty((*batch, n))
+    for i in range(m):
+        Fi, Fn = (F[i], F[i + 1]) if keep else (F[i % 2], F[1 - i % 2])
+        Ti = T[i] if keep else T[0]
+        if repeats and i > 0:  # previous target < j, or == j at a price
+            np.add(Fi[..., 1:], repeat, out=prev)
+            np.minimum(prev, Fi[..., :-1], out=prev)
+            np.add(C[..., i, :], prev, out=Ti)
+        else:  # previous target < j
+            np.add(C[..., i, :], Fi[..., :-1], out=Ti)
+        np.minimum.accumulate(Ti, axis=-1, out=Fn[..., 1:])
+        np.add(Fi[..., 1:], skip, out=prev)  # or row i skipped
+        np.minimum(Fn[..., 1:], prev, out=Fn[..., 1:])
+        Fn[..., 0] = skip * (i + 1)
+    return F, (T if keep else None)
+
+
 def _monotone(C: np.ndarray, skip: float, repeat: float = np.inf
-              ) -> tuple[np.ndarray, np.ndarray]:
+              ) -> tuple[np.ndarray, float]:
     """Order-preserving matching: ``j(i)`` non-decreasing in ``i``, each source node matched
     (cost ``C[i, j]``) or skipped (cost ``skip``), a target reused by consecutive source
     nodes at the extra cost ``repeat`` (``inf``: one-to-one); minimal total cost.
 
-    ``C`` has shape (..., m, n) (a batch of problems). A dynamic programme over source
-    nodes; within a row the best predecessor is a running minimum
-    (``np.minimum.accumulate``), so each row costs O(n) vectorised work. Returns ``j`` of
-    shape (..., m), -1 where the source node is unmatched, and the total cost (...,).
+    ``C`` has shape (m, n). Returns ``j`` (m,), -1 where the source node is unmatched, and
+    the total cost. The backtrack recomputes each decision on the one column it visits.
     """
-    *batch, m, n = C.shape
-    F = np.zeros((*batch, n))  # best cost of rows < i whose last target is <= j
-    took = np.empty((m, *batch, n), bool)
-    arg = np.empty((m, *batch, n), np.intp)
-    again = np.zeros((m, *batch, n), bool)
-    idx = np.arange(n)
-    prev = np.empty((*batch, n))
-    run = np.empty((*batch, n))
+    m, n = C.shape
+    F, T = _forward(C, skip, repeat, keep=True)
+    j = np.full(m, -1, np.intp)
     repeats = np.isfinite(repeat)
-    for i in range(m):
-        # previous target < j; before target 0 every earlier row was skipped
-        prev[..., 0] = skip * i
-        prev[..., 1:] = F[..., :-1]
-        if repeats and i > 0:
-            reuse = F + repeat
-            np.less(reuse, prev, out=again[i])  # or previous target == j, at a price
-            np.minimum(reuse, prev, out=prev)
-        T = np.add(C[..., i, :], prev, out=prev)
-        np.minimum.accumulate(T, axis=-1, out=run)
-        np.maximum.accumulate(np.where(run == T, idx, 0), axis=-1, out=arg[i])
-        skipped = F + skip
-        np.less(run, skipped, out=took[i])
-        np.minimum(run, skipped, out=F)
-    # backtrack, the batch flattened so that plain fancy indexing picks one entry per problem
-    b = int(np.prod(batch, dtype=np.intp))
-    took, arg, again = (a.reshape(m, b, n) for a in (took, arg, again))
-    j = np.full((m, b), -1, np.intp)
-    if b == 1:  # one problem: scalar steps are faster than fancy indexing
-        cur = n - 1
-        for i in range(m - 1, -1, -1):
-            if cur >= 0 and took[i, 0, cur]:
-                a = arg[i, 0, cur]
-                j[i, 0] = a
-                cur = a if again[i, 0, a] else a - 1
-    else:
-        rows = np.arange(b)
-        cur = np.full(b, n - 1, np.intp)
-        for i in range(m - 1, -1, -1):
-            c = np.maximum(cur, 0)
-            t = took[i, rows, c] & (cur >= 0)
-            a = arg[i, rows, c]
-            j[i] = np.where(t, a, -1)
-            cur = np.where(t, np.where(again[i, rows, a], a, a - 1), cur)
-    j = j.T.reshape(*batch, m)
-    return j, F[..., -1]
+    cur = n - 1
+    for i in range(m - 1, -1, -1):
+        if cur < 0:
+            break
+        Ti, Fi = T[i], F[i]
+        a = cur - int(np.argmin(Ti[cur::-1]))  # last position of the minimum so far
+        if Ti[a] < Fi[cur + 1] + skip:  # row i matched (else skipped)
+            j[i] = a
+            again = repeats and i > 0 and Fi[a + 1] + repeat < Fi[a]
+            cur = a if again else a - 1
+    return j, float(F[m, -1])
+
+
+def _monotone_totals(C: np.ndarray, skip: float, repeat: float = np.inf) -> np.ndarray:
+    """The least total cost of :func:`_monotone` for a batch of problems ``C`` (..., m, n),
+    shape (...,), in memory of two rows."""
+    F, _ = _forward(C, skip, repeat, keep=False)
+    return F[C.shape[-2] % 2, ..., -1]
 
 
 def _signature(phi: np.ndarray, width: int) -> np.ndarray:
@@ -351,14 +358,16 @@ def _tangents(y: np.ndarray, closed: bool, k: int = 2) -> np.ndarray:
     return t / np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
 
 
+def _cyclic(C: np.ndarray, closed: bool) -> np.ndarray:
+    """A closed target doubled, so that an order-preserving search may start anywhere."""
+    return np.concatenate([C, C], axis=-1) if closed else C
+
+
 def _ordered_pairs(C: np.ndarray, closed: bool, skip: float, repeat: float):
-    """Order-preserving pairs over a cost (..., m, n); a closed target is doubled so that
-    the search may start anywhere on it (cyclic). Returns j (..., m) and total (...)."""
-    n = C.shape[-1]
-    if closed:
-        C = np.concatenate([C, C], axis=-1)
-    j, total = _monotone(C, skip, repeat)
-    return np.where(j >= 0, j % n, -1), total
+    """Order-preserving pairs over a cost (m, n), cyclic for a closed target. Returns j
+    (m,) and the total cost."""
+    j, total = _monotone(_cyclic(C, closed), skip, repeat)
+    return np.where(j >= 0, j % C.shape[-1], -1), total
 
 
 def _pairs_from_j(j: np.ndarray, cost: np.ndarray, one_to_one: bool) -> np.ndarray:
@@ -447,11 +456,12 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
                 break
             r = ranked[start:start + _POSE_BATCH]
             Cb = np.concatenate([C[r], C[r][:, :, ::-1]])  # forward, reversed target order
-            j, total = _ordered_pairs(Cb, closed, opt["skip"], repeat)
+            total = _monotone_totals(_cyclic(Cb, closed), opt["skip"], repeat)
             k = int(np.argmin(total))
             if total[k] < best_total:
-                best_total, best = total[k], (j[k], k >= len(r))
-        jj, reverse = best
+                best_total, best = total[k], (Cb[k], k >= len(r))
+        jj, _ = _ordered_pairs(best[0], closed, opt["skip"], repeat)
+        reverse = best[1]
         keep = jj >= 0
         if reverse:
             jj = len(cj) - 1 - jj

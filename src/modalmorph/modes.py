@@ -58,40 +58,53 @@ def solve_modes(model, n: int) -> Modes:
 
     The problem is solved in the Gaussian basis, ``K_g psi = w^2 M_g psi`` with
     ``M_g = rho (I kron Gamma)``, which is the same problem without inverting G
-    (method.md §1). Gamma is diagonalised once: that whitens ``M_g`` and measures its
-    condition, so a sigma too large for the node set is refused with a clear error.
+    (method.md §1). Gamma's Cholesky factor ``Gamma = L L^T`` whitens ``M_g``
+    (``psi = (I kron L^-T) y``); its eigenvalues (without vectors, a fraction of the
+    cost) give its condition number, so a sigma too large for the node set is refused
+    with a clear error.
     """
     from .element import _breakdown_message
 
     d, m = model.dim, model.m
     G, Gamma = model.gram
-    lam_g, Q = linalg.eigh(Gamma, check_finite=False)
+    lam_g = linalg.eigh(Gamma, eigvals_only=True, check_finite=False)
     cond = lam_g[-1] / lam_g[0] if lam_g[0] > 0 else np.inf
-    if not cond < MAX_CONDITION:
-        raise ValueError(_breakdown_message(model, cond))
-    W = Q / np.sqrt(lam_g)  # W^T Gamma W = I
-    # whitened stiffness (I kron W)^T K_g (I kron W): two GEMMs on the (d, m, d, m) blocks
-    Kw = model.stiffness_gaussian.reshape(d, m, d, m) @ W  # right factor, one GEMM
-    Kw = np.matmul(W.T, Kw.reshape(d, m, d * m)).reshape(d * m, d * m)  # left, per block row
-    Kw = (Kw + Kw.T) / 2
-    w2, Y = _eigh_lowest(Kw, n)
-    psi = np.matmul(W, Y.reshape(d, m, n)) / np.sqrt(model.material.rho)  # (I kron W) Y
+    try:
+        if not cond < MAX_CONDITION:
+            raise linalg.LinAlgError
+        L = linalg.cholesky(Gamma, lower=True, check_finite=False)
+    except linalg.LinAlgError:
+        raise ValueError(_breakdown_message(model, cond)) from None
+
+    def whiten(B):  # (I kron L^-1) B for B of shape (d*m, k)
+        X = B.reshape(d, m, -1).transpose(1, 0, 2).reshape(m, -1)
+        X = linalg.solve_triangular(L, X, lower=True, check_finite=False)
+        return X.reshape(m, d, -1).transpose(1, 0, 2).reshape(B.shape)
+
+    # (I kron L^-1) K_g (I kron L^-T): K_g is symmetric, so whitening its rows, then the
+    # rows of the transpose, whitens both sides
+    Kw = whiten(whiten(model.stiffness_gaussian).T)
+    w2, Y = _eigh_lowest((Kw + Kw.T) / 2, n)
+    psi = linalg.solve_triangular(L, Y.reshape(d, m, n).transpose(1, 0, 2).reshape(m, -1),
+                                  lower=True, trans="T", check_finite=False)
+    psi = psi.reshape(m, d, n).transpose(1, 0, 2) / np.sqrt(model.material.rho)
     phi = np.matmul(G, psi)  # Phi = (I kron G) psi
     w2 = w2 / model.material.rho
     return Modes(frequencies=np.sqrt(np.clip(w2, 0.0, None)), shapes=phi.reshape(d * m, n),
                  gaussian=psi.reshape(d * m, n), dim=d)
 
 
-# Below this fraction of the spectrum, LAPACK's MRRR with an index range (evr) beats the
-# divide-and-conquer solver (evd), which always computes every eigenvector
-# (benchmarks/model.py, measured at 500 and 2000 degrees of freedom).
-_SUBSET_FRACTION = 0.2
+# Below this fraction of the spectrum, and from this size up, LAPACK's MRRR with an index
+# range (evr) beats the divide-and-conquer solver (evd), which always computes every
+# eigenvector (OPENBLAS_NUM_THREADS=1, 24 and 48 of 140-800: evd 1.5/3.0/8.9/24/87 ms at
+# 140/200/320/500/800, evr 24 modes 1.8/2.8/5.5/12/40 ms, evr 20 % 1.9/4.1/10/27/84 ms).
+_SUBSET_FRACTION, _SUBSET_MIN = 0.15, 200
 
 
 def _eigh_lowest(A: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """The ``n`` smallest eigenpairs of the symmetric matrix ``A``, ascending."""
     N = A.shape[0]
-    if n <= _SUBSET_FRACTION * N:
+    if n <= _SUBSET_FRACTION * N and N >= _SUBSET_MIN:
         return linalg.eigh(A, subset_by_index=(0, n - 1), driver="evr", check_finite=False,
                            overwrite_a=True)
     w, V = linalg.eigh(A, driver="evd", check_finite=False, overwrite_a=True)
