@@ -259,7 +259,7 @@ def _monotone(C: np.ndarray, skip: float, repeat: float = np.inf
         if cur < 0:
             break
         Ti, Fi = T[i], F[i]
-        a = cur - int(np.argmin(Ti[cur::-1]))  # last position of the minimum so far
+        a = cur - int(Ti[cur::-1].argmin())  # last position of the minimum so far
         if Ti[a] < Fi[cur + 1] + skip:  # row i matched (else skipped)
             j[i] = a
             again = repeats and i > 0 and Fi[a + 1] + repeat < Fi[a]
@@ -490,7 +490,8 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
     # with the fitted similarity and deformation, on all of them
     sub = spread_indices(src, ALTERNATION_NODES)
     sub_denser = src.spacing * src.m / len(sub) * sim.scale < opt["dense"] * tgt.spacing
-    for it in range(opt["iterations"]):
+    it = -1
+    while (it := it + 1) < opt["iterations"]:
         z = sim.apply(x) + shift
         pairs, C = _search(z, yo, Fo, h2, sub, ordered, closed, opt["skip"],
                            repeat if sub_denser else np.inf, sub_denser)
@@ -503,8 +504,12 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
             good = pairs
         # the fits depend on the trusted pairs alone: the same ones twice running, fitted
         # the same way, are a fixed point
-        if it > opt["rigid"] and previous is not None and np.array_equal(good, previous):
-            break
+        if previous is not None and np.array_equal(good, previous):
+            if it > opt["rigid"]:
+                break
+            # a fixed point of the rigid fit: the rigid alternations left would repeat this
+            # one exactly, so go on with the deformation at once
+            it = max(it, opt["rigid"])
         previous = good
         sim = align(x[good[:, 0]], yo[good[:, 1]])
         if it >= opt["rigid"]:
