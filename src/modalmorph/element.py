@@ -30,19 +30,29 @@ from scipy.spatial import cKDTree
 from .material import POLYETHYLENE, Material
 from .shape import Shape, as_shape
 
-__all__ = ["FEModel", "DEFAULT_SIGMA", "DEFAULT_CUTOFF", "AUTO_DENSE_MAX_DOF",
-           "DENSE_MAX_DOF", "SOLVERS", "cutoff_radius", "gram_entries", "stiffness_entries"]
+__all__ = ["FEModel", "DEFAULT_SIGMA", "DEFAULT_CUTOFF", "MULTILEVEL_CUTOFF",
+           "AUTO_DENSE_MAX_DOF", "AUTO_MULTILEVEL_MIN_NODES", "DENSE_MAX_DOF", "SOLVERS",
+           "cutoff_radius", "gram_entries", "stiffness_entries"]
 
 # sigma in units of the mean nearest-neighbour spacing; chosen by measurement, see README.
 DEFAULT_SIGMA = 1.0
 # The sparse solver drops every interaction smaller than this fraction of the diagonal.
 DEFAULT_CUTOFF = 1e-10
+# The multilevel solver's default: a radius of 8.1 sigma instead of 10.3, 190 neighbours
+# per node of a 3D surface instead of 294; the lowest 60 frequencies of the 2000-node
+# benchmark ellipsoid move by 3e-6 relative (benchmarks/scale.py). 1e-4 leaves Gamma
+# indefinite there.
+MULTILEVEL_CUTOFF = 1e-6
 # solver="auto" uses the dense solver up to this many degrees of freedom (d * m): there all
 # modes take about a second (benchmarks/model.py); above it, the sparse one.
 AUTO_DENSE_MAX_DOF = 3000
+# ... and, for 3D shapes, the multilevel solver from this many nodes on: the sparse
+# factor of a 3D point set (some 300 neighbours per node) needs about 1 GB at 2000 nodes
+# and runs out of 8 GB at 3000.
+AUTO_MULTILEVEL_MIN_NODES = 2500
 # Dense (d*m)^2 matrices are refused beyond this size (an 8 * 12000^2 = 1.2 GB array).
 DENSE_MAX_DOF = 12000
-SOLVERS = ("auto", "dense", "sparse")
+SOLVERS = ("auto", "dense", "sparse", "multilevel")
 
 
 def gram_entries(r: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
@@ -110,22 +120,29 @@ class FEModel:
         The material filling the object (default: polyethylene, the paper's choice).
     plane : {"stress", "strain"}, optional
         2D idealisation: plane stress (thin sheet, the default) or plane strain.
-    solver : {"auto", "dense", "sparse"}, optional
+    solver : {"auto", "dense", "sparse", "multilevel"}, optional
         How :meth:`modes` solves the eigenproblem. ``"dense"``: all interactions, dense
         matrices, LAPACK; exact, but O(m^2) memory and O(m^3) time. ``"sparse"``:
         interactions beyond :attr:`cutoff_radius` are dropped, the lowest ``n`` modes
         come from a shift-invert Lanczos solver (ARPACK) on sparse matrices; about linear
-        memory in the number of pairs. ``"auto"`` (default) picks dense up to
-        ``AUTO_DENSE_MAX_DOF`` degrees of freedom (``d * m``) and sparse above.
+        memory in the number of pairs, plus the fill of a sparse factor, which is large
+        for 3D point sets. ``"multilevel"``: the same truncated matrices, no
+        factorisation; the lowest ``n`` modes of a coarse model give the starting
+        subspace of a preconditioned LOBPCG iteration on the full model, stopped when
+        every residual is below a tolerance (:mod:`modalmorph.multilevel`; iterative, so
+        less accurate than the others: see there). ``"auto"`` (default) picks dense up to
+        ``AUTO_DENSE_MAX_DOF`` degrees of freedom (``d * m``), multilevel for 3D shapes
+        of ``AUTO_MULTILEVEL_MIN_NODES`` nodes or more, and sparse otherwise.
         The resolved choice is :attr:`solver`.
     cutoff : float, optional
-        Sparse solver only: the relative size below which interactions are dropped (see
-        :func:`cutoff_radius`; default 1e-10, a radius of 10.3 sigma). This truncation is
-        the sparse model's only approximation: with the default, its lowest frequencies
-        agree with the dense ones to about 1e-9 relative (``tests/test_scale.py``,
-        ``benchmarks/scale.py``). A larger cutoff saves time and memory and costs
-        accuracy; since the truncated Gram matrices are no longer exactly positive
-        definite, a cutoff near the inverse condition number of ``Gamma`` fails.
+        Sparse and multilevel solvers: the relative size below which interactions are
+        dropped (see :func:`cutoff_radius`; default 1e-10, a radius of 10.3 sigma, and
+        ``MULTILEVEL_CUTOFF`` = 1e-6, 8.1 sigma, for the multilevel solver). This
+        truncation is the sparse model's only approximation: with 1e-10, its lowest
+        frequencies agree with the dense ones to about 1e-9 relative
+        (``tests/test_scale.py``, ``benchmarks/scale.py``). A larger cutoff saves time and
+        memory and costs accuracy; since the truncated Gram matrices are no longer exactly
+        positive definite, a cutoff near the inverse condition number of ``Gamma`` fails.
 
     Raises
     ------
@@ -137,7 +154,7 @@ class FEModel:
 
     def __init__(self, shape, *, sigma: float = DEFAULT_SIGMA,
                  material: Material = POLYETHYLENE, plane: str = "stress",
-                 solver: str = "auto", cutoff: float = DEFAULT_CUTOFF):
+                 solver: str = "auto", cutoff: float | None = None):
         self.shape: Shape = as_shape(shape)
         if not np.isfinite(sigma) or sigma <= 0:
             raise ValueError(f"sigma must be a positive finite number, got {sigma}")
@@ -145,11 +162,15 @@ class FEModel:
             raise ValueError(f"material must be a Material, got {type(material).__name__}")
         if solver not in SOLVERS:
             raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
-        if not (isinstance(cutoff, int | float) and 0 < cutoff < 1):
+        if cutoff is not None and not (isinstance(cutoff, int | float) and 0 < cutoff < 1):
             raise ValueError(f"cutoff must be a number in (0, 1), got {cutoff!r}")
         if solver == "auto":
-            solver = "dense" if self.shape.dim * self.shape.m <= AUTO_DENSE_MAX_DOF else "sparse"
+            d, m = self.shape.dim, self.shape.m
+            solver = ("dense" if d * m <= AUTO_DENSE_MAX_DOF else
+                      "multilevel" if d == 3 and m >= AUTO_MULTILEVEL_MIN_NODES else "sparse")
         self.solver = solver
+        if cutoff is None:
+            cutoff = MULTILEVEL_CUTOFF if solver == "multilevel" else DEFAULT_CUTOFF
         self.cutoff = float(cutoff)
         self.sigma_rel = float(sigma)
         self.material = material
@@ -303,11 +324,41 @@ class FEModel:
         all_cols = np.broadcast_to(offsets[None, :, None] + cols, (d, d, nnz_block)).reshape(-1)
         return sparse.csr_array((data.reshape(-1), (all_rows, all_cols)), shape=(d * m, d * m))
 
+    @cached_property
+    def stiffness_gaussian_blocks(self) -> sparse.bsr_array:
+        """Sparse ``K_g`` node-major: a (dm, dm) BSR matrix of d x d blocks, block
+        ``(i, j)`` holding ``K_g^ab_ij`` for all ``a, b``, truncated at
+        :attr:`cutoff_radius`.
+
+        The same entries as :attr:`stiffness_gaussian_sparse` with the degrees of freedom
+        ordered node-major (x, y, z of node 0, then of node 1, ...): one column index per
+        block instead of one per entry, and block products (used by
+        :mod:`modalmorph.multilevel`).
+        """
+        d, m = self.dim, self.m
+        lam, mu = self.lame
+        i, j = self.pairs.T
+        itype = i.dtype
+        diag = np.arange(m, dtype=itype)
+        rows = np.r_[i, j, diag]
+        order = np.argsort(rows, kind="stable")
+        rows = rows[order]
+        cols = np.r_[j, i, diag][order]
+        del order
+        data = np.empty((len(rows), d, d))
+        chunk = 1 << 20
+        for start in range(0, len(rows), chunk):
+            r = self.points[cols[start:start + chunk]] - self.points[rows[start:start + chunk]]
+            data[start:start + chunk] = stiffness_entries(r, self.sigma, lam, mu)
+        indptr = np.zeros(m + 1, dtype=itype)
+        np.cumsum(np.bincount(rows, minlength=m), out=indptr[1:])
+        return sparse.bsr_array((data, cols, indptr), shape=(d * m, d * m))
+
     # -- products with M, K and A = G^-1 -----------------------------------------------
 
     @cached_property
     def _g_factor(self):
-        if self.solver == "sparse":
+        if self._truncated:
             try:
                 return splinalg.splu(self.gram_sparse[0].tocsc(), permc_spec="MMD_AT_PLUS_A",
                                      diag_pivot_thresh=0.0,
@@ -327,7 +378,7 @@ class FEModel:
         d, m = self.dim, self.m
         flat = np.asarray(B, dtype=np.float64).reshape(d, m, -1).transpose(1, 0, 2)
         flat = flat.reshape(m, -1)
-        if self.solver == "sparse":
+        if self._truncated:
             X = self._g_factor.solve(np.asfortranarray(flat))
         else:
             X = linalg.cho_solve(self._g_factor, flat, check_finite=False)
@@ -338,9 +389,15 @@ class FEModel:
         d, m = self.dim, self.m
         B = np.asarray(B, dtype=np.float64)
         if which == "mass":
-            Gamma = self.gram_sparse[1] if self.solver == "sparse" else self.gram[1]
+            Gamma = self.gram_sparse[1] if self._truncated else self.gram[1]
             out = np.stack([Gamma @ b for b in B.reshape(d, m, -1)])
             return out.reshape(B.shape)
+        if self.solver == "multilevel":  # its node-major blocks, not a second copy
+            from .multilevel import _component_major, _node_major
+
+            flat = _node_major(B.reshape(d * m, -1), d, m)
+            return _component_major(self.stiffness_gaussian_blocks @ flat, d,
+                                    m).reshape(B.shape)
         Kg = self.stiffness_gaussian_sparse if self.solver == "sparse" else \
             self.stiffness_gaussian
         return Kg @ B
@@ -390,6 +447,11 @@ class FEModel:
         K = Y.transpose(2, 1, 3, 0).reshape(d * m, d * m)
         return (K + K.T) / 2
 
+    @property
+    def _truncated(self) -> bool:
+        """Whether this model drops the pairs beyond :attr:`cutoff_radius`."""
+        return self.solver in ("sparse", "multilevel")
+
     @cached_property
     def _dense_g_factor(self):
         if self.solver == "dense":
@@ -402,7 +464,9 @@ class FEModel:
     def modes(self, n: int | None = None):
         """The lowest ``n`` modes (all when ``None``) of ``K Phi = M Phi Omega^2`` (6).
 
-        With the sparse solver ``n`` is required and must be below ``d * m - 1``.
+        With the sparse and multilevel solvers ``n`` is required and must be below
+        ``d * m - 1``. The multilevel solver raises a ValueError when it does not
+        converge (see :mod:`modalmorph.multilevel`).
 
         Returns
         -------
@@ -410,21 +474,23 @@ class FEModel:
             Frequencies ascending and mass-normalised mode shapes.
         """
         from .modes import solve_modes, solve_modes_sparse
+        from .multilevel import solve_modes_multilevel
 
         total = self.dim * self.m
-        if n is None and self.solver == "sparse":
+        if n is None and self._truncated:
             raise ValueError(
-                f"the sparse solver computes the lowest n modes: pass n (e.g. modes(50)), "
-                f"or use FEModel(..., solver='dense') for all {total} modes of this "
-                f"{self.m}-node shape")
+                f"the {self.solver} solver computes the lowest n modes: pass n (e.g. "
+                f"modes(50)), or use FEModel(..., solver='dense') for all {total} modes of "
+                f"this {self.m}-node shape")
         n = total if n is None else int(n)
         if not 1 <= n <= total:
             raise ValueError(f"n must be between 1 and {total} (d * m), got {n}")
-        if self.solver == "sparse" and n >= total - 1:
-            raise ValueError(f"the sparse solver computes at most {total - 2} modes of this "
-                             f"{self.m}-node shape, got n={n}; use solver='dense'")
+        if self._truncated and n >= total - 1:
+            raise ValueError(f"the {self.solver} solver computes at most {total - 2} modes "
+                             f"of this {self.m}-node shape, got n={n}; use solver='dense'")
         if n not in self._modes:
-            solve = solve_modes_sparse if self.solver == "sparse" else solve_modes
+            solve = {"sparse": solve_modes_sparse, "multilevel": solve_modes_multilevel,
+                     "dense": solve_modes}[self.solver]
             self._modes[n] = solve(self, n)
         return self._modes[n]
 
