@@ -21,13 +21,14 @@ swapping; such a stage is reported as ``timeout`` or ``out of memory``.
 
 Stages (one function each):
 
-- ``model``: the lowest ``n`` modes of the source. 2D: the full sparse model (cKDTree
-  pairs within the cutoff, sparse ``G``, ``Gamma``, ``K_g``; ``solver="sparse"``). 3D:
-  the full model does not fit (each node has ~300 neighbours within the cutoff; 10k nodes
-  ran out of 8 GB), so the *reduced* route: ``coarsen`` to ``--reduced-nodes`` nodes
-  (farthest-point subset), the sparse model's lowest ``n`` modes on it, and
-  ``modes_at`` to evaluate them at every node. ``build s`` includes the coarsening,
-  ``eval s`` is the evaluation.
+- ``model``: the lowest ``n`` modes of the source's full model. 2D: the sparse solver
+  (cKDTree pairs within the cutoff, sparse ``G``, ``Gamma``, ``K_g``, shift-invert
+  Lanczos; ``solver="sparse"``). 3D: the multilevel solver (``solver="multilevel"``, the
+  automatic choice from 2500 3D nodes: cutoff 1e-6, ~190 neighbours per node, a
+  1000-node coarse model's modes as the start of a preconditioned LOBPCG on the full
+  model), since the sparse factor does not fit (each node has ~300 neighbours within
+  the default cutoff; 10k nodes ran out of 8 GB); its iterations and largest residual
+  are printed under the row. ``build s`` is the assembly of the sparse matrices.
 - ``dense``: the full model with ``solver="dense"``, where it fits (up to 4k nodes in 2D).
 - ``agreement``: for cases with both, the largest relative difference of the lowest ``n``
   frequencies, and the smallest cosine of the principal angles between the two mode
@@ -45,12 +46,14 @@ Stages (one function each):
   as many steps as ``morph`` took), timed in the same run; speed-up = reference time /
   (match + morph time).
 
-A second table, ``--reduced-check`` (default on), compares the 3D reduced route with the
-full sparse model where the full one still fits (2000 nodes): lowest ``n`` frequencies
-and mode subspaces (principal angles in the full model's mass inner product, the reduced
-modes evaluated at all nodes). The reduced model is a coarser discretisation of the same
-object with sigma scaled to its node spacing: frequencies differ by tens of percent, the
-low mode subspaces much less; see the printed numbers.
+A second table, ``--reduced-check`` (default on), compares at 2000 3D nodes, where the
+exact sparse solver (cutoff 1e-10) still fits, the multilevel solver and the *reduced*
+route (``reduced_modes``: ``coarsen`` to 500 or 1000 nodes, that model's modes evaluated
+at all nodes with ``modes_at``) against it: lowest ``n`` frequencies (largest and median
+relative difference) and mode subspaces (principal angles in the exact model's mass inner
+product). The multilevel modes are the full model's, to the residual tolerance; the
+reduced model is a coarser discretisation with sigma scaled to its node spacing, whose
+frequencies differ by tens of percent.
 
 Run ``python benchmarks/scale.py`` (all cases, about 10 minutes on 2 loaded cores) or
 ``--cases 2d-1k,2d-4k`` for some of them; ``--timeout`` is per stage.
@@ -60,6 +63,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import re
 import resource
 import subprocess
@@ -78,6 +82,7 @@ from morph import reference, reference_match  # noqa: E402
 import modalmorph as mm  # noqa: E402
 from modalmorph import FEModel, Shape  # noqa: E402
 from modalmorph.datasets import load_hand, load_hands  # noqa: E402
+from modalmorph.multilevel import COARSE_NODES  # noqa: E402
 from modalmorph.shape import coarsen  # noqa: E402
 
 CASES = {
@@ -167,22 +172,42 @@ def reduced_modes(shape: Shape, n: int, nodes: int):
 
 
 def stage_model(case: str, args, out: Path) -> dict:
-    """Lowest n modes: full sparse model (2D) or the reduced route (3D)."""
+    """Lowest n modes of the full model: sparse (2D) or multilevel (3D, the automatic
+    choice there), with the multilevel solver's iterations and largest residual."""
     a, _, _ = objects(case)
     n = args.modes
-    if CASES[case][0] == "ellipsoid":
-        phi, modes, (build, eig, ev) = reduced_modes(a, n, args.reduced_nodes)
-        return {"build_s": build, "modes_s": eig, "eval_s": ev,
-                "model_nodes": args.reduced_nodes, "rows": phi.shape[0]}
     t0 = time.perf_counter()
-    model = FEModel(a, solver="sparse")
-    _ = model.gram_sparse, model.stiffness_gaussian_sparse
+    model = FEModel(a, solver="multilevel" if CASES[case][0] == "ellipsoid" else "sparse")
+    _ = model.gram_sparse
+    _ = (model.stiffness_gaussian_blocks if model.solver == "multilevel" else
+         model.stiffness_gaussian_sparse)
     t1 = time.perf_counter()
-    modes = model.modes(n)
+    with _SolverLog() as log:
+        modes = model.modes(n)
     t2 = time.perf_counter()
-    np.savez(out, frequencies=modes.frequencies, shapes=modes.shapes)
+    if model.solver != "multilevel":  # the 100k 3D shapes are not saved
+        np.savez(out, frequencies=modes.frequencies, shapes=modes.shapes)
     return {"build_s": t1 - t0, "modes_s": t2 - t1, "model_nodes": model.m,
-            "pairs_per_node": 2 * len(model.pairs) / model.m}
+            "solver": model.solver, "pairs_per_node": 2 * len(model.pairs) / model.m,
+            **log.result}
+
+
+class _SolverLog(logging.Handler):
+    """Collects the multilevel solver's iterations and largest residual from its log."""
+
+    def __enter__(self):
+        self.result = {}
+        self._logger = logging.getLogger("modalmorph.multilevel")
+        self._logger.addHandler(self)
+        self._logger.setLevel(logging.INFO)
+        return self
+
+    def __exit__(self, *exc):
+        self._logger.removeHandler(self)
+
+    def emit(self, record):
+        _, _, m, its, res = record.args
+        self.result.update(iterations=its, residual=res)
 
 
 def stage_dense(case: str, args, out: Path) -> dict:
@@ -237,15 +262,33 @@ def stage_reference(case: str, args, out: Path) -> dict:
 
 
 def stage_check(case: str, args, out: Path) -> dict:
-    """3D: the reduced route against the full sparse model at CHECK_NODES nodes."""
+    """3D, CHECK_NODES nodes: the multilevel solver (default cutoff 1e-6) and the reduced
+    route against the exact sparse solver (cutoff 1e-10)."""
     n = args.modes
     shape = Shape(blob(CHECK_NODES))
     t0 = time.perf_counter()
     full = FEModel(shape, solver="sparse")
     fm = full.modes(n + 1)
     t_full = time.perf_counter() - t0
+    ff = fm.frequencies[:n]
+    gap = float(fm.frequencies[n] / fm.frequencies[n - 1] - 1)
     rows = []
-    for nodes in (250, 500, 1000):
+    t0 = time.perf_counter()
+    multi = FEModel(shape, solver="multilevel")
+    with _SolverLog() as log:
+        mm = multi.modes(n)
+    t_multi = time.perf_counter() - t0
+    # the same nodes: principal angles in the exact sparse model's Gaussian-basis mass
+    Mpsi = full.material.rho * np.concatenate(
+        [full.gram_sparse[1] @ p for p in fm.gaussian[:, :n].reshape(3, full.m, -1)])
+    cos = np.linalg.svd(mm.gaussian.T @ Mpsi, compute_uv=False)
+    cos10 = np.linalg.svd(mm.gaussian[:, :10].T @ Mpsi[:, :10], compute_uv=False)
+    err = mm.frequencies / ff - 1
+    rows.append({"route": f"multilevel {COARSE_NODES}", "full_s": t_full, "route_s": t_multi,
+                 "freq_diff1": float(err[0]), "freq_diff": float(np.max(np.abs(err))),
+                 "freq_med": float(np.median(np.abs(err))), "angle10": float(1 - cos10.min()),
+                 "angle": float(1 - cos.min()), "gap": gap, **log.result})
+    for nodes in (500, 1000):
         t0 = time.perf_counter()
         phi, rm, _ = reduced_modes(shape, n, nodes)
         t_red = time.perf_counter() - t0
@@ -254,13 +297,12 @@ def stage_check(case: str, args, out: Path) -> dict:
                             compute_uv=False)
         cos10 = np.linalg.svd(fm.shapes[:, :10].T @ full.apply_mass(_orth(phi[:, :10], full)),
                               compute_uv=False)
-        ff, fr = fm.frequencies[:n], rm.frequencies
-        rows.append({"nodes": nodes, "full_s": t_full, "reduced_s": t_red,
-                     "freq_diff": float(np.max(np.abs(fr / ff - 1))),
-                     "freq_diff1": float(fr[0] / ff[0] - 1),
-                     "ratio_diff": float(np.max(np.abs(fr / fr[0] / (ff / ff[0]) - 1))),
+        err = rm.frequencies / ff - 1
+        rows.append({"route": f"reduced {nodes}", "full_s": t_full, "route_s": t_red,
+                     "freq_diff1": float(err[0]), "freq_diff": float(np.max(np.abs(err))),
+                     "freq_med": float(np.median(np.abs(err))),
                      "angle10": float(1 - cos10.min()), "angle": float(1 - cos.min()),
-                     "gap": float(fm.frequencies[n] / fm.frequencies[n - 1] - 1)})
+                     "gap": gap})
     return {"rows": rows}
 
 
@@ -402,21 +444,27 @@ def main(argv=None) -> int:
                   f"{_fmt(ma, 'err50', '5.1f')} {_fmt(ma, 'err90', '5.1f')} | "
                   f"{mo_t} {_fmt(mo, 'peak_mb', '5.0f')} {steps} {conv} | {speed}",
                   flush=True)
+            if "residual" in md:
+                print(f"#   {case}: multilevel solver, {md['iterations']} LOBPCG iterations, "
+                      f"largest relative residual {md['residual']:.1e}, "
+                      f"{md['pairs_per_node']:.0f} neighbours per node", flush=True)
         if not args.no_reduced_check and any(CASES[c][0] == "ellipsoid" for c in cases):
             ck = run_stage("3d-10k", "check", args, tmp)
-            print(f"\n# 3D reduced route against the full sparse model, {CHECK_NODES} "
-                  f"nodes, lowest {n} modes (peak {_fmt(ck, 'peak_mb', '5.0f')} MB)")
+            print(f"\n# 3D multilevel solver and reduced route against the exact sparse "
+                  f"solver, {CHECK_NODES} nodes, lowest {n} modes "
+                  f"(peak {_fmt(ck, 'peak_mb', '5.0f')} MB)")
             if "error" in ck:
                 print(f"  {ck['error']}")
             else:
-                print(f"{'reduced':>7} {'full s':>6} {'red. s':>6} {'f1 diff':>7} "
-                      f"{'max fdiff':>9} {'ratio diff':>10} {'1-cos 10':>8} "
-                      f"{'1-cos n':>8} {'gap n':>6}")
+                print(f"{'route':>15} {'exact s':>7} {'route s':>7} {'f1 diff':>7} "
+                      f"{'max fdiff':>9} {'med fdiff':>9} {'1-cos 10':>8} {'1-cos n':>8} "
+                      f"{'gap n':>6} {'its':>3} {'resid':>7}")
                 for r in ck["rows"]:
-                    print(f"{r['nodes']:7d} {r['full_s']:6.1f} {r['reduced_s']:6.1f} "
-                          f"{r['freq_diff1']:+7.1%} {r['freq_diff']:9.1%} "
-                          f"{r['ratio_diff']:10.1%} {r['angle10']:8.1e} {r['angle']:8.1e} "
-                          f"{r['gap']:6.1e}")
+                    print(f"{r['route']:>15} {r['full_s']:7.1f} {r['route_s']:7.1f} "
+                          f"{r['freq_diff1']:+7.1%} {r['freq_diff']:9.2e} "
+                          f"{r['freq_med']:9.2e} {r['angle10']:8.1e} {r['angle']:8.1e} "
+                          f"{r['gap']:6.1e} {_fmt(r, 'iterations', '3d')} "
+                          f"{_fmt(r, 'residual', '7.1e')}")
     print("# err50/err90: pair error against the ground truth, median and 90th percentile "
           "(2D: rows of the 1590-row hands; 3D: target node spacings); steps*: morph ran "
           "on the ground-truth pairs because matching failed")

@@ -131,7 +131,8 @@ def test_sparse_large_contour_runs():
 @pytest.mark.parametrize(
     "kwargs, match",
     [
-        ({"solver": "lapack"}, r"solver must be one of \('auto', 'dense', 'sparse', 'multilevel'\)"),
+        ({"solver": "lapack"},
+         r"solver must be one of \('auto', 'dense', 'sparse', 'multilevel'\)"),
         ({"solver": None}, "solver must be one of"),
         ({"cutoff": 0.0}, r"cutoff must be a number in \(0, 1\)"),
         ({"cutoff": 1.5}, r"cutoff must be a number in \(0, 1\)"),

@@ -15,7 +15,10 @@ Large objects: every entry above decays like ``exp(-|r|^2 / (4 sigma^2))`` and s
 multiple of the node spacing, so each node interacts with a bounded number of others. The
 sparse solver keeps only pairs closer than a cutoff radius (:attr:`FEModel.cutoff_radius`,
 set by ``cutoff``) and works with sparse ``G``, ``Gamma`` and ``K_g``; no m x m matrix is
-formed.
+formed. For 3D point sets (some 200-300 neighbours per node) the sparse factor of the
+shift-invert solver does not fit beyond a few thousand nodes; the multilevel solver
+(:mod:`modalmorph.multilevel`) only multiplies by ``K_g`` (stored once per pair as a
+d x d block, :attr:`FEModel.stiffness_gaussian_blocks`) and ``Gamma``.
 """
 
 from __future__ import annotations
