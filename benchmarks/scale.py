@@ -206,7 +206,7 @@ class _SolverLog(logging.Handler):
         self._logger.removeHandler(self)
 
     def emit(self, record):
-        _, _, m, its, res = record.args
+        _, _, its, res = record.args
         self.result.update(iterations=its, residual=res)
 
 
