@@ -13,6 +13,7 @@ from modalmorph.matching import (
     _monotone,
     _monotone_totals,
     _tangents,
+    _untangle,
     affinity,
     match,
     modal_features,
@@ -230,6 +231,27 @@ def test_monotone_search_is_optimal():
             expected = [_monotone(c, 0.5, repeat)[1] for c in batch]
             np.testing.assert_allclose(_monotone_totals(batch, 0.5, repeat), expected,
                                        rtol=0, atol=1e-12)
+
+
+def test_untangle_keeps_one_turn():
+    n = 20
+    # partners in source order: 14, 15, 16, 17, then on round to 15 at the end: the last
+    # pair crosses the first two; dropping it (one node) is cheaper than dropping two
+    t = np.r_[14, 15, 16, 17, np.arange(0, 12), 15]
+    keep = _untangle(t, np.zeros(len(t)), n, skip=1.0, strict=True)
+    assert_array_equal(np.flatnonzero(~keep), [len(t) - 1])
+    # the same overlap with costly first pairs: those two go instead
+    cost = np.r_[0.9, 0.9, np.zeros(len(t) - 2)]
+    keep = _untangle(t, cost, n, skip=1.0, strict=True)
+    assert_array_equal(np.flatnonzero(~keep), [0, 1])
+    # a step back in the middle (10 -> 8): the overlapping pairs on one side go
+    t = np.r_[np.arange(0, 11), np.arange(8, 20)]
+    keep = _untangle(t, np.zeros(len(t)), n, skip=1.0, strict=True)
+    kept = t[keep]
+    assert np.all(np.diff(kept) > 0) and keep.sum() == len(t) - 3
+    # a consistent cyclic sequence (one turn, starting anywhere) is left alone
+    t = np.r_[np.arange(12, 20), np.arange(0, 10)]
+    assert _untangle(t, np.zeros(len(t)), n, skip=1.0, strict=True).all()
 
 
 def test_bad_input(hand90):

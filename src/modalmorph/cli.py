@@ -23,7 +23,7 @@ _MORPH_OPTIONS = {
     "remove_rigid": bool, "k": float, "dt": float, "alpha": float, "delta": float,
     "damping": list, "c_x": float, "c_v": float, "sigma": float, "modes": (int, float, str),
     "scheme": str, "tol": float, "tol_distance": float, "max_steps": int,
-    "equilibrium_tol": float, "neighbours": int,
+    "equilibrium_tol": float, "unmatched": str, "neighbours": int,
 }
 _OTHER_OPTIONS = {"method": str, "nodes": int, "threshold": float, "material": str,
                   "E": float, "nu": float, "rho": float}
@@ -142,6 +142,11 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument("--remove-rigid", dest="remove_rigid", action="store_const", const=True,
                    default=None, help="remove rotation, translation and scale first (Horn): "
                                       "morph only the non-rigid part, in fewer steps")
+    d.add_argument("--unmatched", choices=("arclength", "mean"), default=None,
+                   help="contours: where unmatched nodes are pulled, between the partners "
+                        "of their matched neighbours; arclength (default): spread evenly "
+                        "along the target; mean: the paper's weighted mean (20), which "
+                        "folds long unmatched runs")
     d.add_argument("--neighbours", type=int, default=None,
                    help="3D point sets: matched neighbours that pull an unmatched node")
     s = morph.add_argument_group("stopping")

@@ -8,7 +8,9 @@ import numpy as np
 from scipy.linalg import lapack
 from scipy.spatial import cKDTree
 
-__all__ = ["Newmark", "LoadTargets", "check_newmark"]
+__all__ = ["Newmark", "LoadTargets", "check_newmark", "UNMATCHED_RULES"]
+
+UNMATCHED_RULES = ("arclength", "mean")
 
 # Groups of (20) with at most this many (node, candidate) pairs share one vectorised pass.
 _SMALL_GROUP = 256
@@ -27,17 +29,27 @@ def check_newmark(alpha: float, delta: float) -> None:
 
 
 class LoadTargets:
-    """Where each source node is pulled to: its partner, or the neighbourhood rule (20).
+    """Where each source node is pulled to: its partner, or a rule for unmatched nodes.
 
     Matched node ``i``: its partner on the target (19). Unmatched node ``B`` of an ordered
-    contour between matched neighbours ``A`` and ``C`` (along the contour): the weighted
-    mean of the target nodes ``B'`` between their partners ``A'`` and ``C'`` (the shorter
-    way round a closed target; ``A'`` and ``C'`` themselves when none lies between), with
-    weights ``D_tot - D_B'`` normalised to sum to 1, ``D_B' = |X_B - X_2,B'|`` (20). At the
-    ends of an open contour, a node with one matched neighbour ``A`` moves with ``A``
-    (target ``X_1,B + A' - A``). For unordered 3D point sets and surfaces the neighbours
-    are the ``neighbours`` nearest matched nodes (Euclidean, in the source), and ``B`` is
-    pulled to ``X_1,B`` plus the (20)-weighted mean of their displacements ``A' - A``.
+    contour between matched neighbours ``A`` and ``C`` (along the contour), pulled towards
+    the target stretch from their partners ``A'`` to ``C'`` (the shorter way round a
+    closed target):
+
+    - ``rule="arclength"``: the point of that stretch at the same fraction of its arc
+      length as ``B`` has along the source from ``A`` to ``C``. A run of unmatched nodes
+      is laid evenly along the stretch, however long the run.
+    - ``rule="mean"``: the paper's (20), the weighted mean of the target nodes ``B'``
+      strictly between ``A'`` and ``C'`` (``A'`` and ``C'`` themselves when none lies
+      between), with weights ``D_tot - D_B'`` normalised to sum to 1,
+      ``D_B' = |X_B - X_2,B'|`` at the current shape. Every node of a long run is pulled
+      to nearly the same point (the weights are nearly uniform), which folds the run.
+
+    At the ends of an open contour, a node with one matched neighbour ``A`` moves with
+    ``A`` (target ``X_1,B + A' - A``). For unordered 3D point sets and surfaces (either
+    rule) the neighbours are the ``neighbours`` nearest matched nodes (Euclidean, in the
+    source), and ``B`` is pulled to ``X_1,B`` plus the (20)-weighted mean of their
+    displacements ``A' - A``.
 
     Parameters
     ----------
@@ -49,10 +61,16 @@ class LoadTargets:
         Topology of the source (and target) contour.
     neighbours : int
         Number of matched neighbours for unordered objects.
+    rule : {"arclength", "mean"}
+        The rule for unmatched nodes of a contour (above).
     """
 
     def __init__(self, source, target, pairs, *, ordered: bool, closed: bool,
-                 target_closed: bool = True, neighbours: int = 6):
+                 target_closed: bool = True, neighbours: int = 6, rule: str = "arclength"):
+        if rule not in UNMATCHED_RULES:
+            raise ValueError(f"unmatched must be one of {UNMATCHED_RULES}, got {rule!r}")
+        self.rule = rule
+        self.closed = closed
         m = len(source)
         self.source = source
         self.target = target
@@ -92,8 +110,11 @@ class LoadTargets:
                     continue
             by_key.setdefault((a, c), []).append(b)
         for (a, c), nodes in by_key.items():
-            cand = _between(self.partner[a], self.partner[c], n, target_closed)
-            groups.append(("mean", np.asarray(nodes), cand))
+            if self.rule == "arclength":
+                groups.append(("fixed", *self._along(a, c, np.asarray(nodes), target_closed)))
+            else:
+                cand = _between(self.partner[a], self.partner[c], n, target_closed)
+                groups.append(("mean", np.asarray(nodes), cand))
         if carry_nodes:
             groups.append(("carry", np.asarray(carry_nodes), np.asarray(carry_from)[:, None]))
         return groups
@@ -114,10 +135,31 @@ class LoadTargets:
         self._mean_nodes, self._seg = np.unique(self._node_of, return_inverse=True)
         self._fixed = []
         for kind, nodes, cand in self._groups:
-            if kind == "carry":  # where the matched neighbours' displacements take the node
+            if kind == "fixed":  # arclength rule: cand holds the targets themselves
+                self._fixed.append((nodes, cand))
+            elif kind == "carry":  # where the matched neighbours' displacements take the node
                 disp = self.target[self.partner[cand]] - self.source[cand]  # (b, k, d)
                 D = np.linalg.norm(self.source[nodes, None, :] - self.source[cand], axis=2)
                 self._fixed.append((nodes, self.source[nodes] + _weighted_mean(D, disp)))
+
+    def _along(self, a: int, c: int, nodes: np.ndarray, target_closed: bool):
+        """Arclength rule: the unmatched ``nodes`` between matched ``a`` and ``c`` laid
+        along the target from ``a'`` to ``c'`` at their fractions of the source's arc
+        length from ``a`` to ``c``. Returns the nodes and their targets (b, d)."""
+        m, n = len(self.source), len(self.target)
+        nodes = nodes[np.argsort((nodes - a) % m)]  # in order from a (cyclic)
+        t = _fractions(self.source[np.r_[a, nodes, c]])[1:-1]
+        a2, c2 = self.partner[a], self.partner[c]
+        if target_closed:
+            fwd, bwd = (c2 - a2) % n, (a2 - c2) % n
+            if a == c:  # one matched node: round the whole target, the source's way
+                fwd = n
+            path = (a2 + np.arange(fwd + 1)) % n if fwd <= bwd else (a2 - np.arange(bwd + 1)) % n
+        else:
+            path = np.arange(a2, c2 + 1) if a2 <= c2 else np.arange(a2, c2 - 1, -1)
+        pts = self.target[path]
+        s = _fractions(pts)
+        return nodes, np.column_stack([np.interp(t, s, pts[:, k]) for k in range(pts.shape[1])])
 
     def targets(self, current: np.ndarray) -> np.ndarray:
         """Target position of every node for the current shape ``current`` (m, d)."""
@@ -140,6 +182,13 @@ class LoadTargets:
         for nodes, fixed in self._fixed:
             out[nodes] = fixed
         return out
+
+
+def _fractions(path: np.ndarray) -> np.ndarray:
+    """Cumulative arc length along a polyline (k, d) as a fraction of its length, (k,)
+    (evenly spaced when the polyline has no length)."""
+    cum = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))]
+    return cum / cum[-1] if cum[-1] > 0 else np.linspace(0.0, 1.0, len(path))
 
 
 def _between(a2: int, c2: int, n: int, closed: bool) -> np.ndarray:

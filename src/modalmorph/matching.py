@@ -370,6 +370,36 @@ def _ordered_pairs(C: np.ndarray, closed: bool, skip: float, repeat: float):
     return np.where(j >= 0, j % C.shape[-1], -1), total
 
 
+def _untangle(t: np.ndarray, cost: np.ndarray, n: int, skip: float, strict: bool
+              ) -> np.ndarray:
+    """Pairs of a cyclic order-preserving search that go round the target once.
+
+    ``t`` (K,) are the partners, in source order, on a closed target of ``n`` nodes, and
+    ``cost`` their costs. On the doubled target the search may step forward by nearly a
+    whole turn, which is a step backwards on the closed target: there, and at the
+    source's own cut, partners can overlap and cross. Each extra turn is removed at the
+    largest step: unrolled from just after it, the pairs at the end that reach past where
+    the first ones started are dropped, or the first ones they overlap, whichever keeps
+    the search's objective (pair costs plus ``skip`` per unmatched node) lower. Returns a
+    mask of the pairs kept.
+    """
+    keep = np.ones(len(t), bool)
+    while True:
+        idx = np.flatnonzero(keep)
+        steps = np.diff(np.r_[t[idx], t[idx[:1]]]) % n  # to the next partner, cyclically
+        if idx.size < 2 or steps.sum() <= n:  # round once (or all on one target)
+            return keep
+        k = int(np.argmax(steps))  # the step back, seen as nearly a whole turn
+        r = np.roll(idx, -(k + 1))
+        u = t[r[0]] + np.r_[0, np.cumsum(np.roll(steps, -(k + 1))[:-1])]
+        first, last = u[0] + n, u[-1] - n  # how far each end may reach
+        end = r[u >= first] if strict else r[u > first]
+        start = r[u <= last] if strict else r[u < last]
+        loss_end = skip * len(end) - cost[end].sum()  # change of the objective
+        loss_start = skip * len(start) - cost[start].sum()
+        keep[end if loss_end <= loss_start else start] = False
+
+
 def _pairs_from_j(j: np.ndarray, cost: np.ndarray, one_to_one: bool) -> np.ndarray:
     i = np.flatnonzero(j >= 0)
     pairs = np.c_[i, j[i]]
@@ -522,6 +552,8 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
                            repeat, denser)
     cost = C[pairs[:, 0], pairs[:, 1]]
     keep = cost <= reject
+    if closed:  # partners round the target once: none crossing at the cut or a step back
+        keep &= _untangle(pairs[:, 1], cost, n, opt["skip"], strict=not denser)
     pairs, cost = pairs[keep], cost[keep]
     pairs = np.c_[pairs[:, 0], order[pairs[:, 1]]]
     landed = tgt.to_user(z)  # where the fitted similarity and deformation take the source

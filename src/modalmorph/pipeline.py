@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .dynamics import LoadTargets, Newmark, check_newmark
+from .dynamics import UNMATCHED_RULES, LoadTargets, Newmark, check_newmark
 from .element import DEFAULT_SIGMA, FEModel
 from .energy import node_energy, strain_energy
 from .material import POLYETHYLENE, Material
@@ -94,7 +94,7 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
           modes: int | float | None = None, solver: str = "auto", model_nodes: int = 300,
           scheme: str = "implicit", tol: float = 0.005,
           tol_distance: float | None = None, max_steps: int = 100,
-          equilibrium_tol: float = 1e-5, neighbours: int = 6,
+          equilibrium_tol: float = 1e-5, unmatched: str = "arclength", neighbours: int = 6,
           progress: Callable[[int, float], None] | None = None) -> Morph:
     """Estimate the intermediate shapes that take ``source`` into ``target``.
 
@@ -166,6 +166,17 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
         Stop when no node moves by more than this fraction of the source's size in a step,
         or when the mean distance has changed by less than 0.1 % over 5 steps: the loads
         and the elastic forces balance short of the tolerance. 0 disables both.
+    unmatched : {"arclength", "mean"}, optional
+        Where an unmatched node of a contour is pulled, between the partners of its
+        matched neighbours along the contour. ``"arclength"`` (default): to the point of
+        the target stretch between those partners at the node's fraction of the source
+        stretch's arc length, so a run of unmatched nodes spreads evenly over it.
+        ``"mean"``: the paper's neighbourhood rule (20), a weighted mean of the target
+        nodes of that stretch (weights normalised to 1); it pulls every node of a long
+        run to nearly one point, which folds the contour (measured: the 28 pairs of
+        bundled hands at full resolution cross themselves). 3D point sets use the
+        (20)-weighted displacements of their ``neighbours`` nearest matched nodes either
+        way. See :class:`modalmorph.dynamics.LoadTargets`.
     neighbours : int, optional
         For unordered 3D objects: how many matched neighbours pull an unmatched node.
     progress : callable, optional
@@ -190,7 +201,7 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
                          f"{src.dim}D and {tgt.dim}D")
     _check_options(k=k, dt=dt, damping=damping, scheme=scheme, tol=tol,
                    tol_distance=tol_distance, max_steps=max_steps, neighbours=neighbours,
-                   model_nodes=model_nodes)
+                   model_nodes=model_nodes, unmatched=unmatched)
     check_newmark(alpha, delta)
     if matching is None:
         from .matching import match
@@ -235,7 +246,7 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
         Phi = _Field(md.gaussian, d, g_eval)
         spread = g_eval / g_eval.sum(axis=0)  # each model node's energy over the nodes
     loads_rule = LoadTargets(X1, Y, pairs, ordered=bool(work.ordered), closed=work.closed,
-                             target_closed=tgt.closed, neighbours=neighbours)
+                             target_closed=tgt.closed, neighbours=neighbours, rule=unmatched)
 
     PtP = Phi.gram()
     K_mod = np.diag(w2) + (k_abs * PtP if scheme == "implicit" else 0.0)
@@ -319,7 +330,7 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
                   modes=n_modes, model_nodes=model.m, solver=model.solver, scheme=scheme,
                   tol=tol, tol_distance=tol_distance,
                   max_steps=max_steps, equilibrium_tol=equilibrium_tol,
-                  neighbours=neighbours)
+                  unmatched=unmatched, neighbours=neighbours)
     return Morph(shapes=np.array(shapes), loads=np.array(loads), energy=np.array(energy),
                  node_energy=np.array(e_node), mean_distance=np.array(dist) * size,
                  matching=matching, similarity=similarity, converged=converged,
@@ -405,7 +416,7 @@ def _mode_count(modes, total, *, sparse):
 
 
 def _check_options(*, k, dt, damping, scheme, tol, tol_distance, max_steps, neighbours,
-                   model_nodes):
+                   model_nodes, unmatched):
     if not np.isfinite(k) or k <= 0:
         raise ValueError(f"k must be a positive number, got {k}")
     if not np.isfinite(dt) or dt <= 0:
@@ -422,5 +433,7 @@ def _check_options(*, k, dt, damping, scheme, tol, tol_distance, max_steps, neig
         raise ValueError(f"max_steps must be a positive integer, got {max_steps}")
     if int(neighbours) != neighbours or neighbours < 1:
         raise ValueError(f"neighbours must be a positive integer, got {neighbours}")
+    if unmatched not in UNMATCHED_RULES:
+        raise ValueError(f"unmatched must be one of {UNMATCHED_RULES}, got {unmatched!r}")
     if int(model_nodes) != model_nodes or model_nodes < 3:
         raise ValueError(f"model_nodes must be an integer >= 3, got {model_nodes}")
