@@ -56,6 +56,9 @@ AUTO_MULTILEVEL_MIN_NODES = 2500
 # Dense (d*m)^2 matrices are refused beyond this size (an 8 * 12000^2 = 1.2 GB array).
 DENSE_MAX_DOF = 12000
 SOLVERS = ("auto", "dense", "sparse", "multilevel")
+# modes_at evaluates the field densely (one (p, m) array, 8 MB) up to this many entries:
+# at 70 x 70 that takes 0.1 ms against 0.6 ms through k-d trees.
+_DENSE_FIELD_MAX = 10**6
 
 
 def gram_entries(r: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
@@ -227,11 +230,17 @@ class FEModel:
                                                       output_type="coo_matrix")
         g = sparse.csr_array((np.exp(-dist.data**2 / (2 * self.sigma**2)),
                               (dist.row, dist.col)), shape=(len(points), self.m))
-        far = np.flatnonzero(g.sum(axis=1) == 0)
-        if far.size:
-            raise ValueError(f"point {far[0]} lies beyond the cutoff radius of every node of "
-                             f"the model: use more model nodes or a larger sigma")
+        _check_reached(g.sum(axis=1) > 0)
         return g
+
+    def _field_small(self, points: np.ndarray) -> np.ndarray:
+        """:meth:`field` as a dense (p, m) array, for few points and nodes (no k-d trees)."""
+        x = np.asarray(points, dtype=np.float64)
+        r2 = (np.sum(x**2, axis=1)[:, None] + np.sum(self.points**2, axis=1)[None, :]
+              - 2 * x @ self.points.T)
+        inside = r2 <= self.cutoff_radius**2
+        _check_reached(inside.any(axis=1))
+        return np.where(inside, np.exp(-np.maximum(r2, 0.0) / (2 * self.sigma**2)), 0.0)
 
     def modes_at(self, modes, points: np.ndarray) -> np.ndarray:
         """Mode shapes evaluated at arbitrary points (normalised frame), shape (d*p, n).
@@ -241,7 +250,8 @@ class FEModel:
         lets a coarse model describe a dense point set (a reduced model).
         """
         d, m = self.dim, self.m
-        g = self.field(points)
+        small = len(points) * m <= _DENSE_FIELD_MAX
+        g = self._field_small(points) if small else self.field(points)
         psi = modes.gaussian.reshape(d, m, -1)
         return np.concatenate([g @ psi[a] for a in range(d)], axis=0)
 
@@ -422,9 +432,16 @@ class FEModel:
     def mass_times_modes(self, modes) -> np.ndarray:
         """``M Phi`` (dm, n) for modes of this model, by one solve with G (method.md §1
         "cheap products"): ``M Phi = (I kron A) rho (I kron Gamma) psi``. Then
-        ``K Phi = M Phi diag(omega^2)``."""
-        return self.solve_gram(self.material.rho * self._apply_gaussian("mass",
-                                                                         modes.gaussian))
+        ``K Phi = M Phi diag(omega^2)``. Dense solver: ``A Gamma`` is formed once (m
+        right-hand sides) and applied by GEMM, 3.6x faster at 300 nodes and all modes than
+        solving for every mode."""
+        if self.solver != "dense":
+            return self.solve_gram(self.material.rho * self._apply_gaussian("mass",
+                                                                             modes.gaussian))
+        d, m = self.dim, self.m
+        a_gamma = linalg.cho_solve(self._g_factor, self.gram[1], check_finite=False)
+        psi = modes.gaussian.reshape(d, m, -1)
+        return self.material.rho * np.matmul(a_gamma, psi).reshape(d * m, -1)
 
     @property
     def mass(self) -> np.ndarray:
@@ -500,6 +517,13 @@ class FEModel:
     def __repr__(self) -> str:
         return (f"FEModel(m={self.m}, d={self.dim}, sigma={self.sigma_rel:g}, "
                 f"material={self.material.name}, solver={self.solver!r})")
+
+
+def _check_reached(reached: np.ndarray) -> None:
+    far = np.flatnonzero(~reached)
+    if far.size:
+        raise ValueError(f"point {far[0]} lies beyond the cutoff radius of every node of the "
+                         f"model: use more model nodes or a larger sigma")
 
 
 def _index_dtype(size: int):
