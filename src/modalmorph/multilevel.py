@@ -26,12 +26,15 @@ reach ``tol`` raises a ValueError: the solver never returns modes it has not che
 from __future__ import annotations
 
 import logging
+import time
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-from scipy import linalg
+from scipy import linalg, sparse
 from scipy.spatial import cKDTree
 
-__all__ = ["solve_modes_multilevel", "COARSE_NODES", "MULTILEVEL_TOL", "MULTILEVEL_MAXITER"]
+__all__ = ["solve_modes_multilevel", "stiffness_components", "COARSE_NODES", "MULTILEVEL_TOL",
+           "MULTILEVEL_MAXITER", "THREADS"]
 
 logger = logging.getLogger(__name__)
 
@@ -45,6 +48,13 @@ MULTILEVEL_MAXITER = 20
 # Nodes per preconditioner patch: dense (d * 32)^2 Cholesky factors, 9 * 32 doubles per
 # 3D node in all (0.23 GB at 100k nodes).
 _PATCH_NODES = 32
+# Patches per batched product in the preconditioner (a few MB of temporaries each).
+_PATCH_BATCH = 256
+# Rows per chunk of the dense block operations in LOBPCG (a few MB of temporaries each).
+_ROWS = 4096
+# Threads for the sparse products and the preconditioner (the benchmark machine has 2
+# cores; scipy's sparse products and numpy's batched matmul release the GIL).
+THREADS = 2
 
 
 def _guard(n: int) -> int:
@@ -54,7 +64,8 @@ def _guard(n: int) -> int:
 
 
 def solve_modes_multilevel(model, n: int, *, coarse_nodes: int = COARSE_NODES,
-                           tol: float = MULTILEVEL_TOL, maxiter: int = MULTILEVEL_MAXITER):
+                           tol: float = MULTILEVEL_TOL, maxiter: int = MULTILEVEL_MAXITER,
+                           threads: int = THREADS):
     """The lowest ``n`` modes of a large sparse model by a coarse start and LOBPCG.
 
     Parameters
@@ -70,6 +81,9 @@ def solve_modes_multilevel(model, n: int, *, coarse_nodes: int = COARSE_NODES,
         returned mode.
     maxiter : int, optional
         LOBPCG iterations at most.
+    threads : int, optional
+        Threads for the sparse products (each takes a block of rows); the result does not
+        depend on it beyond round-off.
 
     Returns
     -------
@@ -89,39 +103,70 @@ def solve_modes_multilevel(model, n: int, *, coarse_nodes: int = COARSE_NODES,
     d, m = model.dim, model.m
     rho = model.material.rho
     k = min(n + _guard(n), d * m // 2)
-    Kb = model.stiffness_gaussian_blocks
-    G, Gamma = model.gram_sparse
+    clock = _Clock()
 
     # 1. coarse start: displacement fields of the coarse modes at the fine nodes
     coarse = coarsen(model.shape, min(coarse_nodes, m // 2))
     cmodel = FEModel(coarse, sigma=model.sigma_rel, material=model.material,
                      plane=model.plane, cutoff=model.cutoff)
     kc = min(k, d * coarse.m - 2)
-    cmodes = cmodel.modes(kc)
-    V = cmodel.modes_at(cmodes, coarse.to_normalized(model.shape.points))
-    V = _node_major(V, d, m)
     if kc <= n:
         raise ValueError(f"the multilevel solver needs more than n={n} coarse modes; this "
                          f"{m}-node shape is small enough for solver='sparse' or 'dense'")
+    cmodes = cmodel.modes(kc)
+    # the solver's node order: leaves of a k-d tree, so that a node's neighbours are close
+    # in memory and the preconditioner's patches are consecutive nodes
+    order = cKDTree(model.points, leafsize=8).indices
+    V = cmodel.modes_at(cmodes, coarse.to_normalized(model.shape.points[order]))
+    del cmodes, cmodel
+    clock("coarse start")
 
-    def apply_m(X):
-        return (Gamma @ X.reshape(m, -1)).reshape(X.shape)
-
-    precondition = _patch_preconditioner(model)
-    w2, psi, res, its = _lobpcg(Kb, apply_m, precondition, V, n, tol, maxiter)
-    if not np.all(res[:n] <= tol):
-        bad = int(np.argmax(res[:n]))
-        raise ValueError(
-            f"the multilevel solver did not converge for this {m}-node shape: mode {bad} "
-            f"has relative residual {res[bad]:.1e} > tol={tol:g} after {its} iterations; "
-            f"raise maxiter or coarse_nodes, or use solver='sparse' on fewer nodes. "
-            + (_breakdown_message(model) if not np.all(np.isfinite(res)) else ""))
+    threads = max(1, int(threads))
+    with ThreadPoolExecutor(threads) as pool:
+        ops = _Operators(model, order, pool, threads)
+        clock("K_g and Gamma")
+        precondition = _patch_preconditioner(model, order, pool, threads)
+        clock("preconditioner")
+        start = [V]  # the solver frees V once it is used
+        del V
+        w2, psi, res, its = _lobpcg(ops.stiffness, ops.mass, precondition, start, n, tol,
+                                    maxiter, _Rows(pool, threads, d * m), clock)
+        del precondition
+        if not np.all(res[:n] <= tol):
+            bad = int(np.argmax(res[:n]))
+            raise ValueError(
+                f"the multilevel solver did not converge for this {m}-node shape: mode "
+                f"{bad} has relative residual {res[bad]:.1e} > tol={tol:g} after {its} "
+                f"iterations; raise maxiter or coarse_nodes, or use solver='sparse' on fewer "
+                f"nodes. " + (_breakdown_message(model) if not np.all(np.isfinite(res))
+                              else ""))
+        psi = psi[:, :n] / np.sqrt(rho)  # psi^T (rho M_g) psi = I
+        ops.drop_stiffness()
+        phi = ops.gram(psi)  # Phi = (I kron G) psi, G assembled a block of rows at a time
+        clock("Phi")
     logger.info("multilevel: %d modes of %d nodes in %d iterations, max residual %.1e",
                 n, m, its, res[:n].max())
-    psi = _component_major(psi[:, :n], d, m) / np.sqrt(rho)  # psi^T (rho M_g) psi = I
-    phi = np.stack([G @ p for p in psi.reshape(d, m, n)]).reshape(d * m, n)
-    return Modes(frequencies=np.sqrt(np.clip(w2[:n] / rho, 0.0, None)), shapes=phi,
-                 gaussian=psi, dim=d)
+    return Modes(frequencies=np.sqrt(np.clip(w2[:n] / rho, 0.0, None)),
+                 shapes=_model_order(phi, order, d), gaussian=_model_order(psi, order, d),
+                 dim=d)
+
+
+class _Clock:
+    """Debug log of the solver's phases: seconds since the start."""
+
+    def __init__(self):
+        self.start = time.perf_counter()
+
+    def __call__(self, phase: str) -> None:
+        logger.debug("multilevel phase %s: done at %.2f s", phase,
+                     time.perf_counter() - self.start)
+
+
+def _model_order(X: np.ndarray, order: np.ndarray, d: int) -> np.ndarray:
+    """Component-major rows in the solver's node order -> the model's node order."""
+    out = np.empty_like(X)
+    out.reshape(d, len(order), -1)[:, order] = X.reshape(d, len(order), -1)
+    return out
 
 
 def _node_major(X: np.ndarray, d: int, m: int) -> np.ndarray:
@@ -132,31 +177,215 @@ def _component_major(X: np.ndarray, d: int, m: int) -> np.ndarray:
     return np.ascontiguousarray(X.reshape(m, d, -1).transpose(1, 0, 2).reshape(d * m, -1))
 
 
-def _patch_preconditioner(model):
-    """Block Jacobi: exact solves with ``K_g`` restricted to patches of about
-    ``_PATCH_NODES`` neighbouring nodes (consecutive leaves of a k-d tree), node-major."""
+def stiffness_components(r: np.ndarray, sigma: float, lam: float,
+                         mu: float) -> list[np.ndarray]:
+    """The distinct entries of the stiffness blocks ``K_g^ab`` for offsets ``r`` (p, d):
+    ``[K^00, K^11, ..., K^01, K^02, ..., K^12, ...]`` (the d diagonal components, then
+    ``a < b``; ``K^ab = K^ba``), each (p,). The same numbers as
+    :func:`modalmorph.element.stiffness_entries`, without its (p, d, d) array."""
+    d = r.shape[-1]
+    r2 = np.einsum("...a,...a->...", r, r)
+    scale = (np.pi * sigma**2) ** (d / 2) * np.exp(-r2 / (4 * sigma**2)) / sigma**4
+    diag = (lam + mu) * sigma**2 / 2 + mu * (d * sigma**2 / 2 - r2 / 4)
+    del r2
+    out = []
+    for a, b in _components(d):
+        v = (-(lam + mu) / 4) * r[:, a] * r[:, b]
+        if a == b:
+            v += diag
+        v *= scale
+        out.append(v)
+    return out
+
+
+def _components(d: int) -> list[tuple[int, int]]:
+    return [(a, a) for a in range(d)] + [(a, b) for a in range(d) for b in range(a + 1, d)]
+
+
+class _Operators:
+    """The full model's ``K_g`` and ``Gamma`` on the solver's node order, for blocks
+    ``X`` of shape (d*m, c), component-major.
+
+    ``K_g`` is stored as its ``d (d + 1) / 2`` distinct scalar m x m components
+    ``K^ab`` (:func:`stiffness_components`), ``Gamma`` as one more, all over one sparse
+    structure (the pairs within the cutoff and the diagonal). The rows are split into
+    ``threads`` blocks of about equal nonzeros, each with its own index arrays; a product
+    runs one block per thread (scipy's sparse products release the GIL), each block
+    computing ``(K X)_a = sum_b K^ab X_b`` for its rows.
+    """
+
+    def __init__(self, model, order: np.ndarray, pool: ThreadPoolExecutor, threads: int):
+        from .element import gram_entries
+
+        self.d, self.m, self.pool = model.dim, model.m, pool
+        self.sigma = model.sigma
+        d, m = self.d, self.m
+        lam, mu = model.lame
+        self.x = x = model.points[order]
+        rank = np.empty(m, dtype=model.pairs.dtype)
+        rank[order] = np.arange(m, dtype=rank.dtype)
+        i, j = rank[model.pairs[:, 0]], rank[model.pairs[:, 1]]
+        diag = np.arange(m, dtype=i.dtype)
+        pattern = sparse.coo_array(
+            (np.ones(2 * len(i) + m, dtype=np.int8), (np.r_[i, j, diag], np.r_[j, i, diag])),
+            shape=(m, m)).tocsr()
+        del i, j, diag, rank
+        indptr, indices = pattern.indptr, pattern.indices
+        del pattern
+        nnz = int(indptr[-1])
+        cuts = np.searchsorted(indptr, np.arange(threads + 1) * (nnz / threads))
+        cuts[0], cuts[-1] = 0, m
+        cuts = np.unique(cuts)
+        self.blocks = []
+        for r0, r1 in zip(cuts[:-1], cuts[1:], strict=True):
+            p0, p1 = indptr[r0], indptr[r1]
+            # own arrays, not views: scipy copies a slice of a much larger array
+            self.blocks.append((int(r0), int(r1), indptr[r0:r1 + 1] - p0,
+                                indices[p0:p1].copy()))
+        del indptr, indices
+        comps = _components(d)
+        self.index = {}
+        for q, (a, b) in enumerate(comps):
+            self.index[a, b] = self.index[b, a] = q
+
+        def build(block):
+            r0, r1, bptr, bidx = block
+            data = [np.empty(len(bidx)) for _ in range(len(comps) + 1)]
+            for _, _, s0, s1, r in _chunks(x, r0, bptr, bidx):
+                for q, v in enumerate(stiffness_components(r, self.sigma, lam, mu)):
+                    data[q][s0:s1] = v
+                data[-1][s0:s1] = gram_entries(r, self.sigma)[1]
+            return [sparse.csr_array((v, bidx, bptr), shape=(r1 - r0, m)) for v in data]
+
+        mats = list(pool.map(build, self.blocks))
+        self.K = [b[:-1] for b in mats]
+        self.Gamma = [b[-1] for b in mats]
+
+    def _run(self, work) -> None:
+        for _ in self.pool.map(work, range(len(self.blocks))):
+            pass
+
+    def stiffness(self, X: np.ndarray) -> np.ndarray:
+        """``K_g X``."""
+        d, m = self.d, self.m
+        Xs = X.reshape(d, m, -1)
+        Y = np.empty_like(Xs)
+
+        def work(t):
+            r0, r1 = self.blocks[t][:2]
+            K = self.K[t]
+            for a in range(d):
+                y = K[a] @ Xs[a]
+                for b in range(d):
+                    if b != a:
+                        y += K[self.index[a, b]] @ Xs[b]
+                Y[a, r0:r1] = y
+
+        self._run(work)
+        return Y.reshape(X.shape)
+
+    def mass(self, X: np.ndarray) -> np.ndarray:
+        """``(I kron Gamma) X`` (without rho)."""
+        d, m = self.d, self.m
+        Xs = X.reshape(d, m, -1)
+        Y = np.empty_like(Xs)
+
+        def work(t):
+            r0, r1 = self.blocks[t][:2]
+            for a in range(d):
+                Y[a, r0:r1] = self.Gamma[t] @ Xs[a]
+
+        self._run(work)
+        return Y.reshape(X.shape)
+
+    def drop_stiffness(self) -> None:
+        self.K = None
+
+    def gram(self, X: np.ndarray) -> np.ndarray:
+        """``(I kron G) X``, ``G`` assembled anew a chunk of rows at a time."""
+        from .element import gram_entries
+
+        d, m = self.d, self.m
+        Xs = X.reshape(d, m, -1)
+        Y = np.empty_like(Xs)
+
+        def work(t):
+            r0, bptr, bidx = self.blocks[t][0], self.blocks[t][2], self.blocks[t][3]
+            for a0, a1, s0, s1, r in _chunks(self.x, r0, bptr, bidx):
+                G = sparse.csr_array((gram_entries(r, self.sigma)[0], bidx[s0:s1],
+                                      bptr[a0:a1 + 1] - s0), shape=(a1 - a0, m))
+                for a in range(d):
+                    Y[a, r0 + a0:r0 + a1] = G @ Xs[a]
+
+        self._run(work)
+        return Y.reshape(X.shape)
+
+
+_CHUNK = 1 << 19  # entries per chunk of the matrix assembly
+
+
+def _chunks(x, r0, bptr, bidx):
+    """Chunks of whole rows of a row block's entries, about ``_CHUNK`` entries each:
+    ``(a0, a1, s0, s1, r)``: rows ``a0:a1`` of the block, their entries ``s0:s1`` and
+    those entries' offsets ``r = x_j - x_i``."""
+    nrows = len(bptr) - 1
+    bounds = np.unique(np.r_[np.searchsorted(bptr, np.arange(0, bptr[-1], _CHUNK),
+                                             side="right") - 1, nrows])
+    for a0, a1 in zip(bounds[:-1], bounds[1:], strict=True):
+        s0, s1 = int(bptr[a0]), int(bptr[a1])
+        rows = np.repeat(np.arange(r0 + a0, r0 + a1), np.diff(bptr[a0:a1 + 1]))
+        yield a0, a1, s0, s1, x[bidx[s0:s1]] - x[rows]
+
+
+def _patch_preconditioner(model, order: np.ndarray, pool: ThreadPoolExecutor,
+                          threads: int):
+    """Block Jacobi: exact solves with ``K_g`` restricted to patches of ``_PATCH_NODES``
+    consecutive nodes of the solver's order (leaves of a k-d tree, so neighbours), on
+    component-major blocks. Each patch's inverse Cholesky factor ``L^-1`` is stored and
+    the solves are batched products ``L^-T (L^-1 R)``, batches of patches over the
+    threads."""
     from .element import stiffness_entries
 
     d, m = model.dim, model.m
     lam, mu = model.lame
-    order = cKDTree(model.points, leafsize=8).indices
-    patches = [np.sort(order[s:s + _PATCH_NODES]) for s in range(0, m, _PATCH_NODES)]
-    factors = []
-    for idx in patches:
-        x = model.points[idx]
-        blocks = stiffness_entries(x[None, :, :] - x[:, None, :], model.sigma, lam, mu)
-        A = blocks.transpose(0, 2, 1, 3).reshape(d * len(idx), d * len(idx))
+    x = model.points[order]
+    P = _PATCH_NODES
+    starts = list(range(0, m, P))
+    full = m // P  # patches of P nodes; the last one may have fewer
+
+    def inverse_factor(s: int) -> np.ndarray:
+        y = x[s:s + P]
+        blocks = stiffness_entries(y[None, :, :] - y[:, None, :], model.sigma, lam, mu)
+        A = blocks.transpose(2, 0, 3, 1).reshape(d * len(y), d * len(y))
         A[np.diag_indices_from(A)] *= 1 + 1e-8  # K_g is only semi-definite numerically
-        factors.append(linalg.cho_factor(A, lower=True, check_finite=False))
+        L = linalg.cholesky(A, lower=True, check_finite=False)
+        return linalg.solve_triangular(L, np.eye(len(L)), lower=True, check_finite=False)
+
+    Linv = np.stack([inverse_factor(s) for s in starts[:full]])
+    last = inverse_factor(full * P) if full * P < m else None
+    batches = [(b, min(b + _PATCH_BATCH, full)) for b in range(0, full, _PATCH_BATCH)]
 
     def apply(R: np.ndarray) -> np.ndarray:
         k = R.shape[1]
-        Rn, out = R.reshape(m, d, k), np.empty_like(R)
-        On = out.reshape(m, d, k)
-        for idx, fac in zip(patches, factors, strict=True):
-            On[idx] = linalg.cho_solve(fac, Rn[idx].reshape(-1, k),
-                                       check_finite=False).reshape(len(idx), d, k)
-        return out
+        Rs = R.reshape(d, m, k)
+        out = np.empty_like(Rs)
+
+        def work(t):
+            for b0, b1 in batches[t::threads]:
+                # (d, patches, P, k) -> (patches, d*P, k): each patch component-major
+                Rp = Rs[:, b0 * P:b1 * P].reshape(d, b1 - b0, P, k).transpose(1, 0, 2, 3)
+                Li = Linv[b0:b1]
+                Y = np.matmul(Li.transpose(0, 2, 1),
+                              np.matmul(Li, Rp.reshape(b1 - b0, d * P, k)))
+                out[:, b0 * P:b1 * P] = Y.reshape(b1 - b0, d, P, k).transpose(
+                    1, 0, 2, 3).reshape(d, (b1 - b0) * P, k)
+
+        for _ in pool.map(work, range(threads)):
+            pass
+        if last is not None:
+            r = Rs[:, full * P:].reshape(-1, k)
+            out[:, full * P:] = (last.T @ (last @ r)).reshape(d, m - full * P, k)
+        return out.reshape(R.shape)
 
     return apply
 
@@ -174,53 +403,139 @@ def _rayleigh_ritz(A: np.ndarray, B: np.ndarray, k: int):
     return w, (T @ C) * scale[:, None]
 
 
-def _lobpcg(K, apply_m, precondition, V, n, tol, maxiter):
-    """LOBPCG for the lowest ``n`` eigenpairs of ``(K, M)``, block ``V.shape[1]``, started
-    from the span of ``V``. Products with K and M are done once per new block and carried
-    through the Ritz updates. Returns ``(w2, X, residuals, iterations)``."""
+class _Rows:
+    """Dense operations on tall blocks (N, c), a chunk of ``_ROWS`` rows at a time and the
+    chunks spread over the threads: no temporary of a block's full size."""
+
+    def __init__(self, pool: ThreadPoolExecutor, threads: int, N: int):
+        self.pool, self.threads = pool, threads
+        self.chunks = [slice(s, min(s + _ROWS, N)) for s in range(0, N, _ROWS)]
+
+    def map(self, fn):
+        """``[fn(rows) for rows in the chunks]`` summed per thread: one result per
+        thread."""
+        def work(t):
+            out = None
+            for rows in self.chunks[t::self.threads]:
+                v = fn(rows)
+                out = v if out is None else out + v
+            return out
+
+        return [v for v in self.pool.map(work, range(self.threads)) if v is not None]
+
+    def inner(self, S: list, T: list, symmetric: bool = False) -> np.ndarray:
+        """The block matrix ``[[a.T @ b for b in T] for a in S]``; with ``symmetric``
+        (``S[i].T @ T[j] = (S[j].T @ T[i]).T``) only the blocks ``j >= i`` are computed."""
+        def part(rows):
+            blocks = [[None] * len(T) for _ in S]
+            for i, a in enumerate(S):
+                for j, b in enumerate(T):
+                    if not symmetric or j >= i:
+                        blocks[i][j] = a[rows].T @ b[rows]
+            for i in range(len(S)):
+                for j in range(i if symmetric else 0):
+                    blocks[i][j] = blocks[j][i].T
+            return np.block(blocks)
+
+        return sum(self.map(part))
+
+    def norms(self, X: np.ndarray, w2: np.ndarray | None = None,
+              MX: np.ndarray | None = None) -> np.ndarray:
+        """Euclidean norms of the columns of ``X``, or of ``X - MX diag(w2)``."""
+        def part(rows):
+            Y = X[rows] if MX is None else X[rows] - MX[rows] * w2
+            return np.einsum("ij,ij->j", Y, Y)
+
+        return np.sqrt(sum(self.map(part)))
+
+    def each(self, fn) -> None:
+        """``fn(rows)`` for every chunk."""
+        def part(rows):
+            fn(rows)
+            return None
+
+        self.map(part)
+
+    def times(self, Y: np.ndarray, C: np.ndarray) -> None:
+        """``Y <- Y C`` in place (C square)."""
+        def part(rows):
+            Y[rows] = Y[rows] @ C
+
+        self.each(part)
+
+    def residual(self, KX: np.ndarray, MX: np.ndarray, w2: np.ndarray,
+                 cols: np.ndarray) -> np.ndarray:
+        """``(KX - MX diag(w2))[:, cols]``."""
+        R = np.empty((KX.shape[0], len(cols)))
+
+        def part(rows):
+            R[rows] = KX[rows][:, cols] - MX[rows][:, cols] * w2[cols]
+
+        self.each(part)
+        return R
+
+    def subtract(self, W: np.ndarray, X: np.ndarray, H: np.ndarray) -> None:
+        """``W <- W - X H`` in place."""
+        def part(rows):
+            W[rows] -= X[rows] @ H
+
+        self.each(part)
+
+    def ritz_update(self, blocks, Cx: np.ndarray, Cw: np.ndarray,
+                    Cp: np.ndarray | None) -> None:
+        """For each ``(Y, Z, Q)`` of ``blocks``, in place: ``Q <- Z Cw + Q Cp`` (``Q Cp``
+        left out when ``Cp`` is None) and then ``Y <- Y Cx + Q``."""
+        def part(rows):
+            for Y, Z, Q in blocks:
+                q = Z[rows] @ Cw
+                if Cp is not None:
+                    q += Q[rows] @ Cp
+                Q[rows] = q
+                q += Y[rows] @ Cx
+                Y[rows] = q
+
+        self.each(part)
+
+
+def _lobpcg(K, apply_m, precondition, V, n, tol, maxiter, rows, clock=None):
+    """LOBPCG for the lowest ``n`` eigenpairs of ``(K, M)``, block ``V[0].shape[1]``,
+    started from the span of ``V[0]`` (a list, emptied here so that the block is freed
+    once used). ``K`` and ``apply_m`` are functions; ``rows`` a :class:`_Rows`. Products
+    with K and M are done once per new block and carried through the Ritz updates, in
+    place. Returns ``(w2, X, residuals, iterations)``."""
+    V = V.pop()
     k = V.shape[1]
-    KV, MV = K @ V, apply_m(V)
-    A, B = V.T @ KV, V.T @ MV
-    w2, C = _rayleigh_ritz(A, B, k)
-    X, KX, MX = V @ C, KV @ C, MV @ C
+    KV, MV = K(V), apply_m(V)
+    w2, C = _rayleigh_ritz(rows.inner([V], [KV]), rows.inner([V], [MV]), k)
+    for Y in (V, KV, MV):
+        rows.times(Y, C)
+    X, KX, MX = V, KV, MV
     del V, KV, MV
     P = KP = MP = None
     for it in range(maxiter + 1):
-        R = KX - MX * w2
-        res = np.linalg.norm(R, axis=0) / (np.abs(w2) * np.linalg.norm(MX, axis=0))
+        # relative residuals ||K x - w2 M x|| / (w2 ||M x||), without the block K X - M X w2
+        res = rows.norms(KX, w2, MX) / (np.abs(w2) * rows.norms(MX))
+        if clock is not None:
+            clock(f"LOBPCG {it}")
         logger.debug("LOBPCG %d: residuals of the wanted modes max %.1e, median %.1e",
                      it, res[:n].max(), np.median(res[:n]))
         if np.all(res[:n] <= tol) or it == maxiter or not np.all(np.isfinite(res)):
             return w2, X, res, it
         # soft locking: new directions only for the columns not yet converged
-        W = precondition(R[:, res > tol])
-        del R
-        W -= X @ (MX.T @ W)  # M-orthogonal to the current Ritz vectors
-        KW, MW = K @ W, apply_m(W)
+        W = precondition(rows.residual(KX, MX, w2, np.flatnonzero(res > tol)))
+        rows.subtract(W, X, rows.inner([MX], [W]))  # M-orthogonal to the Ritz vectors
+        KW, MW = K(W), apply_m(W)
         S = [X, W] if P is None else [X, W, P]
         KS = [KX, KW] if P is None else [KX, KW, KP]
         MS = [MX, MW] if P is None else [MX, MW, MP]
-        A = np.block([[a.T @ b for b in KS] for a in S])
-        B = np.block([[a.T @ b for b in MS] for a in S])
+        A, B = rows.inner(S, KS, symmetric=True), rows.inner(S, MS, symmetric=True)
+        del S, KS, MS
         w2, C = _rayleigh_ritz(A, B, k)
         a = W.shape[1]
-        Cx, Cw = C[:k], C[k:k + a]
-        # P_new = W Cw (+ P Cp), X_new = X Cx + P_new: no copy of the whole basis
+        Cx, Cw, Cp = C[:k], C[k:k + a], (C[k + a:] if P is not None else None)
         if P is None:
-            P, KP, MP = W @ Cw, KW @ Cw, MW @ Cw
-        else:
-            Cp = C[k + a:]
-            P = P @ Cp
-            P += W @ Cw
-            KP = KP @ Cp
-            KP += KW @ Cw
-            MP = MP @ Cp
-            MP += MW @ Cw
+            P, KP, MP = (np.empty_like(X) for _ in range(3))
+        # P <- W Cw + P Cp, X <- X Cx + P: in place, a chunk of rows at a time
+        rows.ritz_update(((X, W, P), (KX, KW, KP), (MX, MW, MP)), Cx, Cw, Cp)
         del W, KW, MW
-        X = X @ Cx  # one block at a time: each old one is freed before the next
-        X += P
-        KX = KX @ Cx
-        KX += KP
-        MX = MX @ Cx
-        MX += MP
     raise AssertionError("unreachable")
