@@ -28,7 +28,9 @@ Stages (one function each):
   1000-node coarse model's modes as the start of a preconditioned LOBPCG on the full
   model), since the sparse factor does not fit (each node has ~300 neighbours within
   the default cutoff; 10k nodes ran out of 8 GB); its iterations and largest residual
-  are printed under the row. ``build s`` is the assembly of the sparse matrices.
+  are printed under the row. ``build s`` is the assembly of the sparse matrices (for
+  the multilevel solver only the pair search: it assembles its own matrices, inside
+  ``modes s``).
 - ``dense``: the full model with ``solver="dense"``, where it fits (up to 4k nodes in 2D).
 - ``agreement``: for cases with both, the largest relative difference of the lowest ``n``
   frequencies, and the smallest cosine of the principal angles between the two mode
@@ -178,9 +180,10 @@ def stage_model(case: str, args, out: Path) -> dict:
     n = args.modes
     t0 = time.perf_counter()
     model = FEModel(a, solver="multilevel" if CASES[case][0] == "ellipsoid" else "sparse")
-    _ = model.gram_sparse
-    _ = (model.stiffness_gaussian_blocks if model.solver == "multilevel" else
-         model.stiffness_gaussian_sparse)
+    if model.solver == "multilevel":  # it assembles its own matrices from the pairs
+        _ = model.pairs
+    else:
+        _ = model.gram_sparse, model.stiffness_gaussian_sparse
     t1 = time.perf_counter()
     with _SolverLog() as log:
         modes = model.modes(n)
@@ -206,8 +209,9 @@ class _SolverLog(logging.Handler):
         self._logger.removeHandler(self)
 
     def emit(self, record):
-        _, _, its, res = record.args
-        self.result.update(iterations=its, residual=res)
+        if record.msg.startswith("multilevel:"):  # the solver's summary line
+            _, _, its, res = record.args
+            self.result.update(iterations=its, residual=res)
 
 
 def stage_dense(case: str, args, out: Path) -> dict:

@@ -1,12 +1,15 @@
 """The multilevel solver (coarse start + LOBPCG) against the exact ones, and its errors."""
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
+from scipy.spatial import cKDTree
 
 from modalmorph import FEModel
-from modalmorph.element import AUTO_MULTILEVEL_MIN_NODES, MULTILEVEL_CUTOFF
-from modalmorph.multilevel import solve_modes_multilevel
+from modalmorph.element import AUTO_MULTILEVEL_MIN_NODES, MULTILEVEL_CUTOFF, stiffness_entries
+from modalmorph.multilevel import _Operators, solve_modes_multilevel, stiffness_components
 
 from .conftest import sphere_points
 
@@ -99,3 +102,47 @@ def test_selected_by_size():
     assert FEModel(pts, cutoff=1e-8).cutoff == 1e-8
     with pytest.raises(ValueError, match=r"multilevel solver computes the lowest n modes"):
         model.modes()
+
+
+def test_stiffness_components_match_entries():
+    rng = np.random.default_rng(5)
+    r = rng.standard_normal((50, 3))
+    blocks = stiffness_entries(r, 0.7, 2.0, 1.5)
+    comps = stiffness_components(r, 0.7, 2.0, 1.5)
+    pairs = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]
+    for (a, b), v in zip(pairs, comps, strict=True):
+        assert np.array_equal(v, blocks[:, a, b])  # the same operations
+        assert_allclose(v, blocks[:, b, a], rtol=1e-15)
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_operators_match_model_matrices(models, threads):
+    """The solver's own K_g, Gamma and G (k-d tree node order, rows split over threads)
+    against the model's BSR K_g and CSR G, Gamma."""
+    _, model, _, _ = models
+    d, m = model.dim, model.m
+    order = cKDTree(model.points, leafsize=8).indices
+    X = np.random.default_rng(2).standard_normal((d * m, 7))
+    Xo = X.reshape(d, m, -1)[:, order].reshape(d * m, -1)  # the solver's node order
+    back = np.argsort(order)
+    G, Gamma = model.gram_sparse
+    with ThreadPoolExecutor(threads) as pool:
+        ops = _Operators(model, order, pool, threads)
+        assert len(ops.blocks) == threads
+        KX = ops.stiffness(Xo).reshape(d, m, -1)[:, back].reshape(d * m, -1)
+        MX = ops.mass(Xo).reshape(d, m, -1)[:, back].reshape(d * m, -1)
+        GX = ops.gram(Xo).reshape(d, m, -1)[:, back].reshape(d * m, -1)
+    expect = model._apply_gaussian("stiffness", X)
+    assert_allclose(KX, expect, atol=1e-12 * np.abs(expect).max())
+    expect = np.concatenate([Gamma @ x for x in X.reshape(d, m, -1)])
+    assert_allclose(MX, expect, atol=1e-12 * np.abs(expect).max())
+    expect = np.concatenate([G @ x for x in X.reshape(d, m, -1)])
+    assert_allclose(GX, expect, atol=1e-12 * np.abs(expect).max())
+
+
+def test_threads_do_not_change_the_result(models):
+    _, model, _, mm = models
+    one = solve_modes_multilevel(model, N_MODES, coarse_nodes=300, threads=1)
+    # each row's sums are the same whatever thread computes them
+    assert_allclose(one.frequencies, mm.frequencies, rtol=1e-12)
+    assert_allclose(one.gaussian, mm.gaussian, atol=1e-10 * np.abs(mm.gaussian).max())

@@ -26,6 +26,7 @@ reach ``tol`` raises a ValueError: the solver never returns modes it has not che
 from __future__ import annotations
 
 import logging
+import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 
@@ -52,8 +53,11 @@ _PATCH_NODES = 32
 _PATCH_BATCH = 256
 # Rows per chunk of the dense block operations in LOBPCG (a few MB of temporaries each).
 _ROWS = 4096
-# Threads for the sparse products and the preconditioner (the benchmark machine has 2
-# cores; scipy's sparse products and numpy's batched matmul release the GIL).
+# Points per chunk of the coarse modes' fields at the fine nodes.
+_FIELD_CHUNK = 16384
+# Threads for the sparse products (scipy's release the GIL), and for the dense block
+# products when BLAS is single-threaded (see _blas_single_threaded); the benchmark machine
+# has 2 cores. The results do not depend on it beyond round-off.
 THREADS = 2
 
 
@@ -117,20 +121,23 @@ def solve_modes_multilevel(model, n: int, *, coarse_nodes: int = COARSE_NODES,
     # the solver's node order: leaves of a k-d tree, so that a node's neighbours are close
     # in memory and the preconditioner's patches are consecutive nodes
     order = cKDTree(model.points, leafsize=8).indices
-    V = cmodel.modes_at(cmodes, coarse.to_normalized(model.shape.points[order]))
-    del cmodes, cmodel
-    clock("coarse start")
-
     threads = max(1, int(threads))
     with ThreadPoolExecutor(threads) as pool:
+        V = _coarse_fields(cmodel, cmodes, coarse.to_normalized(model.shape.points[order]),
+                           pool)
+        del cmodes, cmodel
+        clock("coarse start")
         ops = _Operators(model, order, pool, threads)
         clock("K_g and Gamma")
-        precondition = _patch_preconditioner(model, order, pool, threads)
+        # dense products (BLAS) on the threads too, unless BLAS runs threads of its own:
+        # concurrent calls into a multithreaded OpenBLAS are several times slower
+        dense = threads if _blas_single_threaded() else 1
+        precondition = _patch_preconditioner(model, order, pool, dense)
         clock("preconditioner")
         start = [V]  # the solver frees V once it is used
         del V
         w2, psi, res, its = _lobpcg(ops.stiffness, ops.mass, precondition, start, n, tol,
-                                    maxiter, _Rows(pool, threads, d * m), clock)
+                                    maxiter, _Rows(pool, dense, d * m), clock)
         del precondition
         if not np.all(res[:n] <= tol):
             bad = int(np.argmax(res[:n]))
@@ -149,6 +156,28 @@ def solve_modes_multilevel(model, n: int, *, coarse_nodes: int = COARSE_NODES,
     return Modes(frequencies=np.sqrt(np.clip(w2[:n] / rho, 0.0, None)),
                  shapes=_model_order(phi, order, d), gaussian=_model_order(psi, order, d),
                  dim=d)
+
+
+def _blas_single_threaded() -> bool:
+    """Whether BLAS is told to use one thread (the usual environment variables)."""
+    return any(os.environ.get(v, "").strip() == "1" for v in
+               ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"))
+
+
+def _coarse_fields(cmodel, cmodes, points: np.ndarray, pool: ThreadPoolExecutor):
+    """``cmodel.modes_at(cmodes, points)``, chunks of points spread over the threads."""
+    d, p = cmodel.dim, len(points)
+    psi = cmodes.gaussian.reshape(d, cmodel.m, -1)
+    V = np.empty((d, p, psi.shape[2]))
+
+    def work(s):
+        g = cmodel.field(points[s:s + _FIELD_CHUNK])
+        for a in range(d):
+            V[a, s:s + _FIELD_CHUNK] = g @ psi[a]
+
+    for _ in pool.map(work, range(0, p, _FIELD_CHUNK)):
+        pass
+    return V.reshape(d * p, -1)
 
 
 class _Clock:
@@ -183,9 +212,16 @@ def stiffness_components(r: np.ndarray, sigma: float, lam: float,
     ``[K^00, K^11, ..., K^01, K^02, ..., K^12, ...]`` (the d diagonal components, then
     ``a < b``; ``K^ab = K^ba``), each (p,). The same numbers as
     :func:`modalmorph.element.stiffness_entries`, without its (p, d, d) array."""
+    return _entries(r, sigma, lam, mu)[0]
+
+
+def _entries(r: np.ndarray, sigma: float, lam: float, mu: float):
+    """:func:`stiffness_components` and ``Gamma`` (as in
+    :func:`modalmorph.element.gram_entries`) for offsets ``r`` (p, d), one exponential."""
     d = r.shape[-1]
     r2 = np.einsum("...a,...a->...", r, r)
-    scale = (np.pi * sigma**2) ** (d / 2) * np.exp(-r2 / (4 * sigma**2)) / sigma**4
+    gamma = (np.pi * sigma**2) ** (d / 2) * np.exp(-r2 / (4 * sigma**2))
+    scale = gamma / sigma**4
     diag = (lam + mu) * sigma**2 / 2 + mu * (d * sigma**2 / 2 - r2 / 4)
     del r2
     out = []
@@ -195,7 +231,7 @@ def stiffness_components(r: np.ndarray, sigma: float, lam: float,
             v += diag
         v *= scale
         out.append(v)
-    return out
+    return out, gamma
 
 
 def _components(d: int) -> list[tuple[int, int]]:
@@ -215,8 +251,6 @@ class _Operators:
     """
 
     def __init__(self, model, order: np.ndarray, pool: ThreadPoolExecutor, threads: int):
-        from .element import gram_entries
-
         self.d, self.m, self.pool = model.dim, model.m, pool
         self.sigma = model.sigma
         d, m = self.d, self.m
@@ -251,10 +285,10 @@ class _Operators:
         def build(block):
             r0, r1, bptr, bidx = block
             data = [np.empty(len(bidx)) for _ in range(len(comps) + 1)]
-            for _, _, s0, s1, r in _chunks(x, r0, bptr, bidx):
-                for q, v in enumerate(stiffness_components(r, self.sigma, lam, mu)):
+            for s0, s1, r in _chunks(x, r0, bptr, bidx):
+                values, data[-1][s0:s1] = _entries(r, self.sigma, lam, mu)
+                for q, v in enumerate(values):
                     data[q][s0:s1] = v
-                data[-1][s0:s1] = gram_entries(r, self.sigma)[1]
             return [sparse.csr_array((v, bidx, bptr), shape=(r1 - r0, m)) for v in data]
 
         mats = list(pool.map(build, self.blocks))
@@ -302,20 +336,19 @@ class _Operators:
         self.K = None
 
     def gram(self, X: np.ndarray) -> np.ndarray:
-        """``(I kron G) X``, ``G`` assembled anew a chunk of rows at a time."""
-        from .element import gram_entries
-
+        """``(I kron G) X``, G from Gamma's entries: ``G_ij = (Gamma_ij / Gamma_ii)^2``
+        (gram_entries), one block of rows at a time."""
         d, m = self.d, self.m
         Xs = X.reshape(d, m, -1)
         Y = np.empty_like(Xs)
+        volume = (np.pi * self.sigma**2) ** (d / 2)
 
         def work(t):
-            r0, bptr, bidx = self.blocks[t][0], self.blocks[t][2], self.blocks[t][3]
-            for a0, a1, s0, s1, r in _chunks(self.x, r0, bptr, bidx):
-                G = sparse.csr_array((gram_entries(r, self.sigma)[0], bidx[s0:s1],
-                                      bptr[a0:a1 + 1] - s0), shape=(a1 - a0, m))
-                for a in range(d):
-                    Y[a, r0 + a0:r0 + a1] = G @ Xs[a]
+            r0, r1, bptr, bidx = self.blocks[t]
+            G = sparse.csr_array((np.square(self.Gamma[t].data / volume), bidx, bptr),
+                                 shape=(r1 - r0, m))
+            for a in range(d):
+                Y[a, r0:r1] = G @ Xs[a]
 
         self._run(work)
         return Y.reshape(X.shape)
@@ -326,15 +359,14 @@ _CHUNK = 1 << 19  # entries per chunk of the matrix assembly
 
 def _chunks(x, r0, bptr, bidx):
     """Chunks of whole rows of a row block's entries, about ``_CHUNK`` entries each:
-    ``(a0, a1, s0, s1, r)``: rows ``a0:a1`` of the block, their entries ``s0:s1`` and
-    those entries' offsets ``r = x_j - x_i``."""
+    ``(s0, s1, r)``: entries ``s0:s1`` and their offsets ``r = x_j - x_i``."""
     nrows = len(bptr) - 1
     bounds = np.unique(np.r_[np.searchsorted(bptr, np.arange(0, bptr[-1], _CHUNK),
                                              side="right") - 1, nrows])
     for a0, a1 in zip(bounds[:-1], bounds[1:], strict=True):
         s0, s1 = int(bptr[a0]), int(bptr[a1])
         rows = np.repeat(np.arange(r0 + a0, r0 + a1), np.diff(bptr[a0:a1 + 1]))
-        yield a0, a1, s0, s1, x[bidx[s0:s1]] - x[rows]
+        yield s0, s1, x[bidx[s0:s1]] - x[rows]
 
 
 def _patch_preconditioner(model, order: np.ndarray, pool: ThreadPoolExecutor,
