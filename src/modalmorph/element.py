@@ -17,8 +17,11 @@ sparse solver keeps only pairs closer than a cutoff radius (:attr:`FEModel.cutof
 set by ``cutoff``) and works with sparse ``G``, ``Gamma`` and ``K_g``; no m x m matrix is
 formed. For 3D point sets (some 200-300 neighbours per node) the sparse factor of the
 shift-invert solver does not fit beyond a few thousand nodes; the multilevel solver
-(:mod:`modalmorph.multilevel`) only multiplies by ``K_g`` (stored once per pair as a
-d x d block, :attr:`FEModel.stiffness_gaussian_blocks`) and ``Gamma``.
+(:mod:`modalmorph.multilevel`) only multiplies by ``K_g`` and ``Gamma``, which it
+assembles from :attr:`FEModel.pairs` itself (six scalar components of ``K_g`` over one
+index structure, products over 2 threads). :attr:`FEModel.stiffness_gaussian_blocks` (the
+same ``K_g`` as d x d blocks) serves ``apply_stiffness`` on such models and is large (about
+1.4 GB at 100k 3D nodes).
 """
 
 from __future__ import annotations
