@@ -645,6 +645,12 @@ def match(source, target, *, method: str = "auto", modes: int | None = None,
         is out of range.
     """
     src, tgt = as_shape(source, "source"), as_shape(target, "target")
+    for name, shape in (("source", src), ("target", tgt)):
+        if shape.dim == 2 and shape.ordered and shape.closed:
+            x, y = shape.normalized.T  # shoelace area, relative to the unit RMS radius
+            if abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))) < 1e-9:
+                raise ValueError(f"{name} is a closed contour with no area (its nodes lie on "
+                                 f"one line): pass it as Shape(points, closed=False)")
     if src.dim != tgt.dim:
         raise ValueError(f"source and target must have the same dimension, got "
                          f"{src.dim}D and {tgt.dim}D")
