@@ -70,7 +70,6 @@ class LoadTargets:
         if rule not in UNMATCHED_RULES:
             raise ValueError(f"unmatched must be one of {UNMATCHED_RULES}, got {rule!r}")
         self.rule = rule
-        self.closed = closed
         m = len(source)
         self.source = source
         self.target = target

@@ -451,6 +451,13 @@ def _search(z, yo, Fo, h2, rows, ordered, closed, skip, repeat, many_to_one):
     return np.c_[r, c], C
 
 
+def _trusted(pairs: np.ndarray, cost: np.ndarray, trust: float, d: int) -> np.ndarray:
+    """The pairs trusted for the alignment and deformation fits: those costing at most
+    ``trust``, or all of them when too few are."""
+    good = pairs[cost <= trust]
+    return pairs if len(good) < max(d + 1, len(pairs) // 4) else good
+
+
 def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: float,
                 options: dict | None = None
                 ) -> tuple[np.ndarray, np.ndarray, Similarity, np.ndarray]:
@@ -519,12 +526,9 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
             for _ in range(_POSE_ROUNDS):
                 pairs, C = _search(s.apply(x), yo, Fo, h2, sub, False, False, opt["skip"],
                                    np.inf, False)
-                cost = C[pairs[:, 0], pairs[:, 1]]
-                good = pairs[cost <= opt["trust"]]
-                if len(good) < max(d + 1, len(pairs) // 4):  # too few trusted: use them all
-                    good = pairs
+                good = _trusted(pairs, C[pairs[:, 0], pairs[:, 1]], opt["trust"], d)
                 s = align(x[sub[good[:, 0]]], yo[good[:, 1]])
-            return cost.sum(), s  # of the last search
+            return C[pairs[:, 0], pairs[:, 1]].sum(), s  # of the last search
 
         sim = min((rounds(align(x[i], y[j])) for i, j in starts), key=lambda t: t[0])[1]
 
@@ -546,9 +550,7 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
         pairs = np.c_[sub[pairs[:, 0]], pairs[:, 1]]
         if it == opt["iterations"] - 1:
             break
-        good = pairs[cost <= opt["trust"]]
-        if len(good) < max(d + 1, len(pairs) // 4):  # too few trusted: use them all
-            good = pairs
+        good = _trusted(pairs, cost, opt["trust"], d)
         # the fits depend on the trusted pairs alone: the same ones twice running, fitted
         # the same way, are a fixed point
         if previous is not None and np.array_equal(good, previous):
