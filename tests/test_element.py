@@ -93,8 +93,8 @@ def test_plane_strain_is_stiffer(hand200):
 @pytest.mark.parametrize(
     "kwargs, match",
     [
-        ({"sigma": 0.0}, "sigma must be a positive"),
-        ({"sigma": np.nan}, "sigma must be a positive"),
+        ({"sigma": 0.0}, "sigma must be None"),
+        ({"sigma": np.nan}, "sigma must be None"),
         ({"material": "steel"}, "material must be a Material"),
         ({"plane": "membrane"}, "plane must be 'stress' or 'strain'"),
     ],

@@ -86,7 +86,8 @@ def _rotation_from_quaternion(q: np.ndarray) -> np.ndarray:
     ])
 
 
-def align(source_points, target_points, *, scale: bool = True) -> Similarity:
+def align(source_points, target_points, *, scale: bool = True,
+          rotate: bool = True) -> Similarity:
     """Similarity that best maps ``source_points`` onto ``target_points`` (Horn, 1987).
 
     Minimises ``sum |target_i - (s R source_i + t)|^2`` over proper rotations ``R`` (the
@@ -99,6 +100,9 @@ def align(source_points, target_points, *, scale: bool = True) -> Similarity:
         {2, 3}, ``k >= 2``.
     scale : bool, optional
         Estimate the scale (default); ``False`` fixes it at 1 (a rigid motion).
+    rotate : bool, optional
+        Estimate the rotation (default); ``False`` fixes it at the identity (translation
+        and scale only, for objects known to share one frame).
 
     Returns
     -------
@@ -128,6 +132,9 @@ def align(source_points, target_points, *, scale: bool = True) -> Similarity:
     norm_l, norm_r = np.sum(cl**2), np.sum(cr**2)
     if norm_l <= 1e-300:
         raise ValueError("source_points all coincide: the similarity is undetermined")
+    s = float(np.sqrt(norm_r / norm_l)) if scale else 1.0  # symmetric scale
+    if not rotate:
+        return Similarity(rotation=np.eye(d), scale=s, translation=mean_r - s * mean_l)
     if d == 2:  # embed with z = 0
         cl3, cr3 = np.c_[cl, np.zeros(k)], np.c_[cr, np.zeros(k)]
     else:
@@ -141,5 +148,4 @@ def align(source_points, target_points, *, scale: bool = True) -> Similarity:
         _, vec = np.linalg.eigh(N)
         q = vec[:, -1]  # eigenvector of the largest eigenvalue
     R = _rotation_from_quaternion(q)[:d, :d]
-    s = float(np.sqrt(norm_r / norm_l)) if scale else 1.0  # symmetric scale
     return Similarity(rotation=R, scale=s, translation=mean_r - s * R @ mean_l)

@@ -36,12 +36,25 @@ from scipy.spatial import cKDTree
 from .material import POLYETHYLENE, Material
 from .shape import Shape, as_shape
 
-__all__ = ["FEModel", "DEFAULT_SIGMA", "DEFAULT_CUTOFF", "MULTILEVEL_CUTOFF",
+__all__ = ["FEModel", "DEFAULT_SIGMA", "AUTO_CONDITION", "MIN_SIGMA", "MAX_SIGMA", "auto_sigma",
+           "check_sigma", "DEFAULT_CUTOFF", "MULTILEVEL_CUTOFF",
            "AUTO_DENSE_MAX_DOF", "AUTO_MULTILEVEL_MIN_NODES", "DENSE_MAX_DOF", "SOLVERS",
            "cutoff_radius", "gram_entries", "stiffness_entries"]
 
 # sigma in units of the mean nearest-neighbour spacing; chosen by measurement, see README.
 DEFAULT_SIGMA = 1.0
+# sigma=None: the largest width up to the nominal one whose Gamma has a condition number of
+# at most AUTO_CONDITION, two decades inside the refusal limit MAX_CONDITION (modes.py).
+# Measured (log10 cond(Gamma) at sigma 1 / 1.5 / 2): evenly sampled circle of 160 nodes
+# 4.0 / 9.1 / 15.8, letter R 3.9 / 8.8 / 14.7, hand 3.6 / 6.5 / 9.1: a nominal 2 is fine for
+# hands and singular for circles and glyphs, so the width must follow the shape.
+AUTO_CONDITION = 1e10
+# Below this sigma neighbouring nodes overlap by less than exp(-1 / (4 * 0.05^2)) = e^-100:
+# they do not interact and the model degenerates (all-NaN modes at 1e-100).
+MIN_SIGMA = 0.05
+# Above this sigma the Gram matrix of any shape of more than a few nodes is numerically
+# singular (condition numbers 1e9-1e17 already at sigma 3, measured as above).
+MAX_SIGMA = 10.0
 # The sparse solver drops every interaction smaller than this fraction of the diagonal.
 DEFAULT_CUTOFF = 1e-10
 # The multilevel solver's default: a radius of 8.1 sigma instead of 10.3, 190 neighbours
@@ -112,6 +125,64 @@ def cutoff_radius(sigma: float, cutoff: float = DEFAULT_CUTOFF) -> float:
     return float(2 * sigma * np.sqrt(x_new))
 
 
+def _log_condition(r2: np.ndarray, sigma: float) -> float:
+    """log10 of the condition number of ``Gamma`` for squared distances ``r2`` (m, m) and
+    an absolute sigma (the factor V of :func:`gram_entries` cancels); capped at 17, where
+    the smallest eigenvalue is lost in double-precision round-off."""
+    ev = np.linalg.eigvalsh(np.exp(-r2 / (4 * sigma**2)))
+    return float(min(np.log10(ev[-1] / ev[0]), 17.0)) if ev[0] > 0 else 17.0
+
+
+def auto_sigma(shape, nominal: float = DEFAULT_SIGMA) -> float:
+    """The Gaussian width (x mean node spacing) used when ``sigma=None``.
+
+    ``nominal`` if the Gram matrix ``Gamma`` is well conditioned there (condition number at
+    most ``AUTO_CONDITION``), else the largest width below it that is, within a factor
+    10^0.5 of the limit: log10 of the condition number is close to linear in sigma^2
+    (measured on circles, glyphs and hands), so a few steps of regula falsi in sigma^2
+    find it. Objects too large for a dense Gram matrix (more than ``AUTO_DENSE_MAX_DOF``
+    degrees of freedom) get ``nominal``: their solvers check the conditioning themselves.
+    """
+    shape = as_shape(shape)
+    if shape.dim * shape.m > AUTO_DENSE_MAX_DOF:
+        return float(nominal)
+    x = shape.normalized
+    r2 = np.maximum(np.sum(x**2, 1)[:, None] + np.sum(x**2, 1)[None, :] - 2 * x @ x.T, 0.0)
+    h, target = shape.spacing, np.log10(AUTO_CONDITION)
+    hi, c_hi = float(nominal), _log_condition(r2, nominal * h)
+    if c_hi <= target:
+        return hi
+    lo, c_lo = hi, c_hi
+    while c_lo > target and lo > MIN_SIGMA:  # halve until well conditioned
+        hi, c_hi = lo, c_lo
+        lo = max(lo / 2, MIN_SIGMA)
+        c_lo = _log_condition(r2, lo * h)
+    for _ in range(_AUTO_STEPS):
+        if target - c_lo <= _AUTO_SLACK:
+            break
+        q = lo**2 + (target - _AUTO_SLACK / 2 - c_lo) * (hi**2 - lo**2) / (c_hi - c_lo)
+        s, c = float(np.sqrt(q)), _log_condition(r2, np.sqrt(q) * h)
+        if c <= target:
+            lo, c_lo = s, c
+        else:
+            hi, c_hi = s, c
+    return lo
+
+
+def check_sigma(sigma) -> None:
+    """Refuse a sigma that is not None or a number in [MIN_SIGMA, MAX_SIGMA]."""
+    if sigma is None:
+        return
+    if not isinstance(sigma, int | float | np.integer | np.floating) or not (
+            MIN_SIGMA <= sigma <= MAX_SIGMA):
+        raise ValueError(f"sigma must be None (chosen per shape) or a number between "
+                         f"{MIN_SIGMA:g} and {MAX_SIGMA:g} (x mean node spacing), got {sigma!r}")
+
+
+# auto_sigma stops within this many decades below AUTO_CONDITION, or after _AUTO_STEPS.
+_AUTO_SLACK, _AUTO_STEPS = 0.5, 8
+
+
 class FEModel:
     """The physical model of one object with Sclaroff's Gaussian element.
 
@@ -120,11 +191,15 @@ class FEModel:
     shape : Shape or array_like, shape (m, d)
         The object. It is modelled in its normalised frame (centroid at the origin, unit
         RMS radius), so the model does not depend on position, orientation or units.
-    sigma : float, optional
+    sigma : float or None, optional
         Width of the Gaussians as a multiple of the mean nearest-neighbour spacing of the
-        nodes (scale-free). Larger values couple nodes further apart (smoother low modes)
-        but make the Gram matrices ill-conditioned; see the README for the measurements
-        behind the default.
+        nodes (scale-free), between ``MIN_SIGMA`` and ``MAX_SIGMA``. Larger values couple
+        nodes further apart (smoother low modes) but make the Gram matrices
+        ill-conditioned. ``None`` (default): ``DEFAULT_SIGMA`` (1) unless that makes
+        ``Gamma`` ill-conditioned for this node set, then the largest width that does not
+        (:func:`auto_sigma`). A given value is used as it is, and refused with a
+        ``ValueError`` (naming the largest width that works) when the Gram matrix is
+        numerically singular. The width used is :attr:`sigma_rel`.
     material : Material, optional
         The material filling the object (default: polyethylene, the paper's choice).
     plane : {"stress", "strain"}, optional
@@ -161,12 +236,11 @@ class FEModel:
         this node set.
     """
 
-    def __init__(self, shape, *, sigma: float = DEFAULT_SIGMA,
+    def __init__(self, shape, *, sigma: float | None = None,
                  material: Material = POLYETHYLENE, plane: str = "stress",
                  solver: str = "auto", cutoff: float | None = None):
         self.shape: Shape = as_shape(shape)
-        if not np.isfinite(sigma) or sigma <= 0:
-            raise ValueError(f"sigma must be a positive finite number, got {sigma}")
+        check_sigma(sigma)
         if not isinstance(material, Material):
             raise ValueError(f"material must be a Material, got {type(material).__name__}")
         if solver not in SOLVERS:
@@ -181,7 +255,7 @@ class FEModel:
         if cutoff is None:
             cutoff = MULTILEVEL_CUTOFF if solver == "multilevel" else DEFAULT_CUTOFF
         self.cutoff = float(cutoff)
-        self.sigma_rel = float(sigma)
+        self.sigma_rel = auto_sigma(self.shape) if sigma is None else float(sigma)
         self.material = material
         self.plane = plane
         if self.dim == 2:
@@ -535,6 +609,9 @@ def _index_dtype(size: int):
 
 def _breakdown_message(model: FEModel, cond: float | None = None) -> str:
     what = f" (condition number {cond:.1e})" if cond is not None else ""
+    works = auto_sigma(model.shape, model.sigma_rel)
+    hint = (f"the largest sigma that keeps it well conditioned here is about {works:.2g}; "
+            if works < model.sigma_rel else "")
     return (f"sigma={model.sigma_rel:g} (x mean node spacing) is too large for this "
-            f"{model.m}-node shape: the Gaussian Gram matrix is numerically singular{what}. "
-            f"Use a smaller sigma (e.g. 1-2) or fewer nodes.")
+            f"{model.m}-node shape: its Gaussian Gram matrix is numerically singular{what}. "
+            f"Use a smaller sigma ({hint}sigma=None chooses one per shape).")

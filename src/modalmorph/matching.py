@@ -30,18 +30,22 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from .align import Similarity, align
-from .element import FEModel
+from .element import FEModel, auto_sigma, check_sigma
 from .shape import Shape, as_shape, resample, spread_indices
 
-__all__ = ["Matching", "match", "modal_features", "affinity", "METHODS"]
+__all__ = ["Matching", "match", "modal_features", "affinity", "METHODS", "ROTATIONS"]
 
 METHODS = ("auto", "local", "global")
+ROTATIONS = ("auto", "free", "none")
 
 # Defaults chosen by measurement on the families of benchmarks/matching.py (3 pairs each,
 # auto method, precision/recall overall): sigma 1 -> 0.90/0.75, sigma 2 -> 0.95/0.95,
 # sigma 3 -> Gram matrix singular on a 160-node model; 48 modes -> 0.92/0.90 vs 24.
 DEFAULT_MODES = 24  # modes describing each node
-DEFAULT_SIGMA = 2.0  # Gaussian width for matching, x mean node spacing of the model
+# Nominal Gaussian width of the matching models, x mean node spacing; sigma=None uses it
+# where the Gram matrix stays well conditioned, else the largest width that does
+# (element.auto_sigma: about 1.55 for an evenly sampled circle or letter).
+DEFAULT_SIGMA = 2.0
 MAX_MODEL_NODES = 160
 # Objects with more nodes are matched on COARSE nodes, then refined (linear memory).
 LARGE = 2000
@@ -58,6 +62,15 @@ _POSE_BATCH = 4  # rotations searched at once by the branch and bound of the pos
 # scale benchmark's blob (1000-3000 nodes): after one round a wrong pose can still cost
 # less (2000 nodes: 2.23 against 2.29), after two the right one is clearly cheapest.
 _POSE_ROUNDS = 2
+# rotation="auto": poses within this angle of the identity keep the common frame ...
+_COMMON_ANGLE = 20.0  # degrees
+# ... and win unless the best pose's search total is below theirs by more than this factor.
+# Measured (total of the best common-frame pose / best total): the 16 shared heart pairs
+# (ED -> ES, one image frame) 1.00-1.51, seven of them above 1.0 (their best pose turned
+# 60-165 degrees); four hand pairs turned by 25 / 45 / 60 / 90 / 180 degrees 1.65-3.7 /
+# 2.1-7.4 / 3.1-12.7 / 5.2-17.6 / 6.2-22.1. Below 45 degrees the common-frame start still
+# finds the turn: the alignment in the alternation is free.
+_COMMON_MARGIN = 2.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,8 +89,9 @@ class Matching:
         The search used.
     modes : int
         Number of modes that described each node.
-    sigma : float
-        Gaussian width of the models, as a multiple of their mean node spacing.
+    sigma : float or None
+        Gaussian width of the models, as a multiple of their mean node spacing, as given
+        (``None``: chosen per model).
     similarity : Similarity or None
         For ``"auto"``: the similarity (in user coordinates) that maps the source onto the
         target, from Horn's method on the final pairs; ``None`` otherwise.
@@ -89,7 +103,7 @@ class Matching:
     cost: np.ndarray
     method: str
     modes: int
-    sigma: float
+    sigma: float | None
     similarity: Similarity | None
     shape: tuple
 
@@ -110,7 +124,7 @@ class Matching:
 # --------------------------------------------------------------------------- modal model
 
 
-def modal_features(shape, n_modes: int, *, sigma: float = DEFAULT_SIGMA,
+def modal_features(shape, n_modes: int, *, sigma: float | None = None,
                    max_nodes: int = MAX_MODEL_NODES) -> tuple[np.ndarray, np.ndarray]:
     """The lowest modes of an object, one row per node, made comparable between objects.
 
@@ -126,8 +140,9 @@ def modal_features(shape, n_modes: int, *, sigma: float = DEFAULT_SIGMA,
     shape : Shape or array_like, shape (m, d)
     n_modes : int
         Number of modes, lowest first.
-    sigma : float, optional
-        Gaussian width as a multiple of the model's mean node spacing.
+    sigma : float or None, optional
+        Gaussian width as a multiple of the model's mean node spacing; ``None``:
+        ``DEFAULT_SIGMA`` or less, as :func:`modalmorph.element.auto_sigma` chooses.
     max_nodes : int, optional
         Largest model built (the eigenproblem is dense: cost grows as nodes cubed).
 
@@ -148,7 +163,8 @@ def modal_features(shape, n_modes: int, *, sigma: float = DEFAULT_SIGMA,
         subset = spread_indices(shape, max_nodes)
         model_shape = shape if len(subset) == shape.m else Shape(
             shape.points[subset], closed=shape.closed, ordered=shape.ordered)
-    model = FEModel(model_shape, sigma=sigma)
+    model = FEModel(model_shape, sigma=auto_sigma(model_shape, DEFAULT_SIGMA)
+                    if sigma is None else sigma)
     n_modes = min(int(n_modes), model.dim * model.m)
     modes = model.modes(n_modes)
     if model_shape is shape:
@@ -440,6 +456,47 @@ _AUTO = dict(skip=_SKIP, sig_weight=_SIG_WEIGHT, width=_SIG_WIDTH, rigid=_RIGID,
              dense=0.95, repeat=_REPEAT)
 
 
+def _pose_candidates(d: int, x: np.ndarray, y: np.ndarray, rotation: str
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Rotations (r, d, d) tried by the pose search and a mask of those that keep the
+    common frame (within ``_COMMON_ANGLE`` of the identity). ``rotation="none"``: the
+    identity alone; ``"free"``: :func:`_rotations`; ``"auto"``: both."""
+    eye = np.eye(d)[None]
+    if rotation == "none":
+        return eye, np.ones(1, bool)
+    rots = _rotations(d, x, y)
+    if rotation == "auto":
+        rots = np.concatenate([eye, rots])
+    cos = (np.trace(rots, axis1=1, axis2=2) - (d - 2)) / 2  # cos of the rotation angle
+    return rots, cos >= np.cos(np.radians(_COMMON_ANGLE)) - 1e-12
+
+
+def _pose_search(C: np.ndarray, candidates: np.ndarray, closed: bool, skip: float,
+                 repeat: float) -> tuple[float, np.ndarray, bool]:
+    """The cheapest pose of an ordered contour among ``candidates`` (indices into the
+    rotations of ``C`` (r, m, n)), each with both directions of the target.
+
+    Branch and bound: an order-preserving total is at least the sum of each row's cheapest
+    choice, so rotations are searched best bound first and the search stops once no bound
+    left can beat the best total found. Returns the total, the cost matrix of the best
+    pose (target reversed when it won reversed) and whether it is reversed.
+    """
+    bound = np.minimum(C[candidates].min(axis=2), skip).sum(axis=1)
+    ranked = candidates[np.argsort(bound)]
+    bound = np.sort(bound)
+    best_total, best = np.inf, None
+    for start in range(0, len(ranked), _POSE_BATCH):
+        if bound[start] >= best_total:
+            break
+        r = ranked[start:start + _POSE_BATCH]
+        Cb = np.concatenate([C[r], C[r][:, :, ::-1]])  # forward, reversed target order
+        total = _monotone_totals(_cyclic(Cb, closed), skip, repeat)
+        k = int(np.argmin(total))
+        if total[k] < best_total:
+            best_total, best = float(total[k]), (Cb[k], k >= len(r))
+    return best_total, *best
+
+
 def _search(z, yo, Fo, h2, rows, ordered, closed, skip, repeat, many_to_one):
     """Pairs (row index, target index) for the source nodes ``rows`` placed at ``z``, and
     the cost matrix: order-preserving for contours, an assignment for point sets."""
@@ -459,7 +516,7 @@ def _trusted(pairs: np.ndarray, cost: np.ndarray, trust: float, d: int) -> np.nd
 
 
 def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: float,
-                options: dict | None = None
+                options: dict | None = None, *, rotation: str = "auto"
                 ) -> tuple[np.ndarray, np.ndarray, Similarity, np.ndarray]:
     """The default matcher; also returns where the fitted similarity and deformation take
     every source node (the target's user coordinates), shape (m, d)."""
@@ -478,7 +535,8 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
     coarse = _COARSE_NODES if ordered else _COARSE_NODES_CLOUD
     ci, cj = spread_indices(src, coarse), spread_indices(tgt, coarse)
     hc2 = h2 * (n / len(cj)) ** 2
-    rots = _rotations(d, x, y)
+    rots, near = _pose_candidates(d, x, y, rotation)
+    rotate = rotation != "none"
     z = np.einsum("rab,ib->ria", rots, x[ci])
     yc = y[cj]
     D = (np.sum(z**2, -1)[:, :, None] + np.sum(yc**2, -1)[None, None, :]
@@ -486,23 +544,13 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
     C = D + F[np.ix_(ci, cj)]
     if ordered:
         repeat = opt["repeat"] if len(ci) > len(cj) else np.inf
-        # branch and bound over the rotations: an order-preserving total is at least the
-        # sum of each row's cheapest choice, so rotations are searched best bound first
-        # and the search stops once no bound left can beat the best total found
-        bound = np.minimum(C.min(axis=2), opt["skip"]).sum(axis=1)
-        ranked = np.argsort(bound)
-        best_total, best = np.inf, None
-        for start in range(0, len(ranked), _POSE_BATCH):
-            if bound[ranked[start]] >= best_total:
-                break
-            r = ranked[start:start + _POSE_BATCH]
-            Cb = np.concatenate([C[r], C[r][:, :, ::-1]])  # forward, reversed target order
-            total = _monotone_totals(_cyclic(Cb, closed), opt["skip"], repeat)
-            k = int(np.argmin(total))
-            if total[k] < best_total:
-                best_total, best = total[k], (Cb[k], k >= len(r))
-        jj, _ = _ordered_pairs(best[0], closed, opt["skip"], repeat)
-        reverse = best[1]
+        total, Cb, reverse = _pose_search(C, np.arange(len(rots)), closed, opt["skip"], repeat)
+        if rotation == "auto":  # the common frame unless another pose is clearly better
+            total_near, Cn, rev_near = _pose_search(C, np.flatnonzero(near), closed,
+                                                    opt["skip"], repeat)
+            if total_near <= _COMMON_MARGIN * total:
+                Cb, reverse = Cn, rev_near
+        jj, _ = _ordered_pairs(Cb, closed, opt["skip"], repeat)
         keep = jj >= 0
         if reverse:
             jj = len(cj) - 1 - jj
@@ -510,7 +558,7 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
     else:
         reverse = False
         starts = [(ci[r], cj[c]) for r, c in map(linear_sum_assignment, C)]
-    sim = align(x[pi], y[pj]) if ordered else None
+    sim = align(x[pi], y[pj], rotate=rotate) if ordered else None
 
     order = np.arange(n)[::-1] if reverse else np.arange(n)
     Fo = F[:, order]
@@ -527,10 +575,16 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
                 pairs, C = _search(s.apply(x), yo, Fo, h2, sub, False, False, opt["skip"],
                                    np.inf, False)
                 good = _trusted(pairs, C[pairs[:, 0], pairs[:, 1]], opt["trust"], d)
-                s = align(x[sub[good[:, 0]]], yo[good[:, 1]])
+                s = align(x[sub[good[:, 0]]], yo[good[:, 1]], rotate=rotate)
             return C[pairs[:, 0], pairs[:, 1]].sum(), s  # of the last search
 
-        sim = min((rounds(align(x[i], y[j])) for i, j in starts), key=lambda t: t[0])[1]
+        tried = [rounds(align(x[i], y[j], rotate=rotate)) for i, j in starts]
+        best = min(range(len(tried)), key=lambda r: tried[r][0])
+        if rotation == "auto":  # the common frame unless another pose is clearly better
+            common = min(np.flatnonzero(near), key=lambda r: tried[r][0])
+            if tried[common][0] <= _COMMON_MARGIN * tried[best][0]:
+                best = common
+        sim = tried[best][1]
 
     # one target per source node, unless the source is denser than the target
     denser = src.spacing * sim.scale < opt["dense"] * tgt.spacing
@@ -560,7 +614,7 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
             # one exactly, so go on with the deformation at once
             it = max(it, opt["rigid"])
         previous = good
-        sim = align(x[good[:, 0]], yo[good[:, 1]])
+        sim = align(x[good[:, 0]], yo[good[:, 1]], rotate=rotate)
         if it >= opt["rigid"]:
             rows = good[:, 0]
             resid = yo[good[:, 1]] - sim.apply(x[rows])
@@ -580,7 +634,8 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
 
 
 def _match_large(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: float,
-                 coarse: int) -> tuple[np.ndarray, np.ndarray, Similarity]:
+                 coarse: int, *, rotation: str = "auto"
+                 ) -> tuple[np.ndarray, np.ndarray, Similarity]:
     """The default matcher for large objects, in memory linear in the node counts.
 
     Both objects are matched on ``coarse`` nodes spread evenly over them; every source
@@ -594,7 +649,7 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: flo
     ci, cj = spread_indices(src, coarse), spread_indices(tgt, coarse)
     sub_s = Shape(src.points[ci], closed=src.closed, ordered=src.ordered)
     sub_t = Shape(tgt.points[cj], closed=tgt.closed, ordered=tgt.ordered)
-    *_, landed_c = _match_auto(sub_s, sub_t, n_modes, sigma, reject)
+    *_, landed_c = _match_auto(sub_s, sub_t, n_modes, sigma, reject, rotation=rotation)
     dist, near = cKDTree(sub_s.points).query(src.points, k=4)
     w = 1.0 / np.maximum(dist, 1e-12 * src.size)
     w /= w.sum(axis=1, keepdims=True)
@@ -608,8 +663,9 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: flo
     return pairs, cost[keep], align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]])
 
 
-def match(source, target, *, method: str = "auto", modes: int | None = None,
-          sigma: float = DEFAULT_SIGMA, reject: float | None = None) -> Matching:
+def match(source, target, *, method: str = "auto", rotation: str = "auto",
+          modes: int | None = None, sigma: float | None = None,
+          reject: float | None = None) -> Matching:
     """Correspondences between the nodes of two objects by modal matching (6)-(8).
 
     Parameters
@@ -626,10 +682,21 @@ def match(source, target, *, method: str = "auto", modes: int | None = None,
         with Horn's alignment and a deformation in the lowest modes; order-preserving
         (cyclic) search for contours, assignment for point clouds. Invariant to
         translation, rotation, scale, start node and direction of a contour.
+    rotation : {"auto", "free", "none"}, optional
+        How the ``"auto"`` search treats the objects' relative orientation.
+        ``"none"``: the objects share one frame (frames of a sequence, end-diastole and
+        end-systole of one image slice): the correspondence is not rotated at all, only
+        translated and scaled. ``"free"``: any rotation, the pose chosen by cost alone
+        (objects drawn in unrelated poses). ``"auto"`` (default): any rotation is tried,
+        but poses within 20 degrees of the given frame are kept unless another pose costs
+        clearly less: near-symmetric shapes (a left ventricle, a circle) keep their common
+        frame, a shape turned by a large angle is still found.
     modes : int, optional
         Number of lowest modes describing each node (default 24).
-    sigma : float, optional
-        Gaussian width of the matching models, x mean node spacing (default 2).
+    sigma : float or None, optional
+        Gaussian width of the matching models, x mean node spacing. ``None`` (default):
+        2, or less where the Gram matrix of a model would be ill-conditioned
+        (:func:`modalmorph.element.auto_sigma`, per model).
     reject : float, optional
         Pairs costing more than this are dropped. ``"global"``: a multiple of the median
         pair cost (default 3). ``"auto"``: squared distance after the final alignment in
@@ -658,20 +725,23 @@ def match(source, target, *, method: str = "auto", modes: int | None = None,
                          f"{src.dim}D and {tgt.dim}D")
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    if modes is not None and (not isinstance(modes, int | np.integer) or modes < 1):
+        raise ValueError(f"modes must be a positive integer, got {modes!r}")
     n_modes = DEFAULT_MODES if modes is None else int(modes)
-    if n_modes < 1:
-        raise ValueError(f"modes must be >= 1, got {modes}")
     n_modes = min(n_modes, src.dim * min(src.m, tgt.m, MAX_MODEL_NODES))
-    if not (np.isfinite(sigma) and sigma > 0):
-        raise ValueError(f"sigma must be a positive finite number, got {sigma}")
+    check_sigma(sigma)
+    if rotation not in ROTATIONS:
+        raise ValueError(f"rotation must be one of {ROTATIONS}, got {rotation!r}")
     if reject is not None and not reject > 0:
         raise ValueError(f"reject must be > 0, got {reject}")
     sim = None
     reject_auto = _REJECT if reject is None else reject
     if method == "auto" and max(src.m, tgt.m) > LARGE:
-        pairs, cost, sim = _match_large(src, tgt, n_modes, sigma, reject_auto, COARSE)
+        pairs, cost, sim = _match_large(src, tgt, n_modes, sigma, reject_auto, COARSE,
+                                        rotation=rotation)
     elif method == "auto":
-        pairs, cost, sim, _ = _match_auto(src, tgt, n_modes, sigma, reject_auto)
+        pairs, cost, sim, _ = _match_auto(src, tgt, n_modes, sigma, reject_auto,
+                                          rotation=rotation)
     else:
         if src.m * tgt.m > MAX_AFFINITY:
             raise ValueError(f"method={method!r} builds the full {src.m} x {tgt.m} affinity "
@@ -690,4 +760,4 @@ def match(source, target, *, method: str = "auto", modes: int | None = None,
         cost = Z[pairs[:, 0], pairs[:, 1]]
     order = np.argsort(pairs[:, 0], kind="stable")
     return Matching(pairs=pairs[order].astype(np.intp), cost=cost[order], method=method,
-                    modes=n_modes, sigma=float(sigma), similarity=sim, shape=(src.m, tgt.m))
+                    modes=n_modes, sigma=sigma, similarity=sim, shape=(src.m, tgt.m))

@@ -9,11 +9,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .dynamics import UNMATCHED_RULES, LoadTargets, Newmark, check_newmark
-from .element import DEFAULT_SIGMA, FEModel
-from .energy import node_energy, strain_energy
+from .element import FEModel, check_sigma
+from .energy import node_energy
 from .material import POLYETHYLENE, Material
 from .modes import rayleigh
-from .shape import Shape, as_shape, coarsen
+from .quality import curve_distances
+from .shape import Shape, as_shape, coarsen, spread_indices
 
 __all__ = ["Morph", "MorphDivergedError", "morph"]
 
@@ -24,6 +25,9 @@ log = logging.getLogger(__name__)
 SPARSE_MODES = 100
 # Equilibrium also when the mean distance gained less than 0.1 % over this many steps.
 _STALL = 5
+# Similarity fields whose modal image is below this fraction of the largest are dependent.
+_RANK_TOL = 1e-10
+FREE_MOTIONS = ("similarity", "none")
 
 
 class MorphDivergedError(ArithmeticError):
@@ -54,14 +58,26 @@ class Morph:
         Strain energy per node (25), same units; sums to ``energy``; may be negative.
     mean_distance : ndarray, shape (T+1,)
         Mean distance of the matched nodes to their partners, in the user's units.
+    distance : ndarray, shape (T+1,)
+        The stop test's measure, in the user's units: for contours the largest of the
+        mean distance of the nodes pulled to partners (the matching's pairs less those
+        freed to cover unpaired stretches of the target) and the distances both ways
+        between the shape and the target curve, so that every stretch of the target
+        counts, paired or not: the mean distance of the shape's nodes to the target
+        polyline, and of the target's nodes to the shape's polyline less what any shape
+        of the source's node count leaves there (a polygon on ``m`` of the target's nodes
+        spread evenly: zero when ``m >= n``; a coarser source cannot follow every corner
+        of a finer target). For point sets: the mean distance of the nodes pulled to
+        partners.
     matching : Matching
         The correspondences used.
     similarity : Similarity or None
         The similarity removed before morphing (``remove_rigid``), else None.
     converged : bool
-        Whether the mean distance reached the tolerance.
+        Whether ``distance`` reached the tolerance.
     stop_reason : str
-        ``"tolerance"``, ``"equilibrium"`` or ``"max_steps"``, with the final distance.
+        One sentence: converged, stopped at equilibrium (loads and elastic forces balance
+        short of the tolerance) or at ``max_steps``, with the final distance.
     source, target : Shape
         The objects as given (the source before any rigid alignment).
     params : dict
@@ -80,6 +96,7 @@ class Morph:
     source: Shape
     target: Shape
     params: dict = field(default_factory=dict)
+    distance: np.ndarray | None = None
 
     @property
     def steps(self) -> int:
@@ -87,10 +104,11 @@ class Morph:
         return self.shapes.shape[0] - 1
 
 
-def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float = 100.0,
+def morph(source, target, *, matching=None, remove_rigid: bool = False,
+          rotation: str = "auto", free_motion: str = "similarity", k: float = 100.0,
           dt: float = 0.1, alpha: float = 0.25, delta: float = 0.5,
           damping: tuple[float, float] = (2.0, 2.0), c_x: float = 0.0, c_v: float = 0.0,
-          material: Material = POLYETHYLENE, sigma: float = DEFAULT_SIGMA,
+          material: Material = POLYETHYLENE, sigma: float | None = None,
           modes: int | float | None = None, solver: str = "auto", model_nodes: int = 300,
           scheme: str = "implicit", tol: float = 0.005,
           tol_distance: float | None = None, max_steps: int = 100,
@@ -114,6 +132,20 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
         Align the source onto the target first with Horn's similarity (rotation,
         translation, scale) from the matched pairs; the morph then holds only the
         non-rigid part and usually needs far fewer steps.
+    rotation : {"auto", "free", "none"}, optional
+        When ``matching`` is not given: how the matcher treats the relative orientation
+        of the objects (see :func:`modalmorph.match`; ``"none"`` for objects drawn in one
+        frame, such as the frames of a sequence).
+    free_motion : {"similarity", "none"}, optional
+        Motions the elastic model does not resist. ``"similarity"`` (default): a change of
+        position, orientation or size of the whole object costs no strain energy (the
+        energy of a displacement is that of its non-similar part,
+        ``min_a (U - S a)^T K (U - S a)`` over the similarity fields ``S``; exact for 2D,
+        small rotations in 3D): the springs then reach a target of any size or pose, and
+        the energy measures the change of shape alone. The Gaussian element's own rigid
+        modes are only nearly free (method.md §1). ``"none"``: the paper's ``U^T K U``
+        (22) for every motion, so a size change is resisted like any strain (a heart
+        morphed onto itself scaled 1000x then stops far from it).
     k : float, optional
         Stiffness of the springs that pull nodes to their targets (19), in units of the
         elastic stiffness of one node of the model. Larger ``k`` pulls harder: fewer steps
@@ -136,8 +168,11 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
         ``c_v`` times it (18). Larger values start faster.
     material : Material, optional
         The material filling the source (default polyethylene, the paper's).
-    sigma : float, optional
-        Gaussian width in units of the mean node spacing (see :class:`FEModel`).
+    sigma : float or None, optional
+        Gaussian width of the physical model in units of its mean node spacing (see
+        :class:`FEModel`); ``None`` (default): 1, or less where the model's Gram matrix
+        would be ill-conditioned. The matcher's models have their own width (see
+        :func:`modalmorph.match`).
     modes : int, float or None, optional
         Modes used in the superposition: all (``None``), a count, or a fraction in (0, 1]
         of all modes (the paper compares all with 2/3). Fewer modes: cheaper steps, a less
@@ -156,15 +191,16 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
         the effective stiffness; unconditionally stable). ``"explicit"``: at the previous
         shape, as in the paper (stable only for small ``k``).
     tol : float, optional
-        Stop when the mean distance of matched nodes to their partners falls below this
-        fraction of the target's RMS radius.
+        Stop (converged) when :attr:`Morph.distance` falls below this fraction of the
+        target's RMS radius: for contours, when the shape is that close to the whole
+        target curve both ways.
     tol_distance : float, optional
         The same tolerance in the user's units; overrides ``tol``.
     max_steps : int, optional
         Maximum number of time steps.
     equilibrium_tol : float, optional
-        Stop when no node moves by more than this fraction of the source's size in a step,
-        or when the mean distance has changed by less than 0.1 % over 5 steps: the loads
+        Stop when no node moves by more than this fraction of the target's size in a step,
+        or when the distance has changed by less than 0.1 % over 5 steps: the loads
         and the elastic forces balance short of the tolerance. 0 disables both.
     unmatched : {"arclength", "mean"}, optional
         Where an unmatched node of a contour is pulled, between the partners of its
@@ -201,12 +237,13 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
                          f"{src.dim}D and {tgt.dim}D")
     _check_options(k=k, dt=dt, damping=damping, scheme=scheme, tol=tol,
                    tol_distance=tol_distance, max_steps=max_steps, neighbours=neighbours,
-                   model_nodes=model_nodes, unmatched=unmatched)
+                   model_nodes=model_nodes, unmatched=unmatched, free_motion=free_motion)
     check_newmark(alpha, delta)
+    check_sigma(sigma)
     if matching is None:
         from .matching import match
 
-        matching = match(src, tgt)
+        matching = match(src, tgt, rotation=rotation)
     pairs = _pairs(matching, src.m, tgt.m)
 
     similarity = None
@@ -248,8 +285,12 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
     loads_rule = LoadTargets(X1, Y, pairs, ordered=bool(work.ordered), closed=work.closed,
                              target_closed=tgt.closed, neighbours=neighbours, rule=unmatched)
 
+    # elastic stiffness in modal coordinates: Omega^2 (13), or with the similarity motions
+    # of the model's nodes made free (free_motion="similarity")
+    K_el = (np.diag(w2) if free_motion == "none" else
+            _similarity_free(md.frequencies, MPhi.T @ _similarity_fields(model.points)))
     PtP = Phi.gram()
-    K_mod = np.diag(w2) + (k_abs * PtP if scheme == "implicit" else 0.0)
+    K_mod = K_el + (k_abs * PtP if scheme == "implicit" else 0.0)
     w_lo, w_hi = _frequency_range(K_mod)
     a_r, b_r = rayleigh(*damping, w_lo, w_hi)
     C_mod = a_r * np.eye(len(w2)) + b_r * K_mod  # (5) on the loaded model
@@ -263,15 +304,30 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
 
     size = reduced.size
     tol_n = (tol_distance / size) if tol_distance is not None else tol * tgt.size / size
-    shapes, loads, energy, e_node, dist = [], [], [], [], []
+    shapes, loads, energy, e_node, mean_dist, dist = [], [], [], [], [], []
+    two_way = bool(work.ordered and tgt.ordered)
+    pulled = loads_rule.pairs  # the pairs the springs (19) pull together
+    if two_way:  # what the best m-node shape on the target leaves: its nodes on m of the
+        # target's, spread evenly; the other target nodes lie off its chords (0 if m >= n)
+        on = Y[spread_indices(tgt, m)]
+        floor = float(curve_distances(on, Y, closed_a=tgt.closed, closed_b=tgt.closed)[1]
+                      .mean())
+
+    def distance(current):  # the stop test's measure, normalised units
+        near = _mean_distance(current, Y, pulled)
+        if not two_way:  # point sets: matched nodes to their partners
+            return near
+        d_ab, d_ba = curve_distances(current, Y, closed_a=work.closed, closed_b=tgt.closed)
+        return max(near, float(d_ab.mean()), float(d_ba.mean()) - floor)
 
     def record(x, current, targets):
         shapes.append(reduced.to_user(current))
         loads.append(k * (targets - current) * size)  # (19)-(20), user length units x k
-        energy.append(strain_energy(x, w2) / k_ref)  # (22)
-        e = node_energy(md.shapes @ x, MPhi @ (w2 * x), d) / k_ref  # (25), model nodes
+        energy.append(float(x @ K_el @ x) / k_ref)  # (22), U^T K U = x^T (Phi^T K Phi) x
+        e = node_energy(md.shapes @ x, MPhi @ (K_el @ x), d) / k_ref  # (25), model nodes
         e_node.append(e if spread is None else spread @ e)
-        dist.append(_mean_distance(current, Y, pairs))
+        mean_dist.append(_mean_distance(current, Y, pairs))
+        dist.append(distance(current))
 
     # t = 0: the source, and the initial state (17), (18), (21)
     T0 = loads_rule.targets(X1)
@@ -282,10 +338,14 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
     else:
         x = MPhi.T @ U0 if spread is None else np.linalg.lstsq(Phi.dense(), U0, rcond=None)[0]
     v = c_v * x  # (18)
-    f = k_abs * Phi.tdot(flat(T0 - X1) - (0.0 if scheme == "implicit" else U0))
-    a = f - C_mod @ v - K_mod @ x
+    # the loads rise from zero over the first step (a(0) without them): a sudden load
+    # excites the stiffest modes, which Newmark's scheme damps slowly unless
+    # alpha = delta / 2 (measured: alpha = delta = 0.5, k = 1000, dt = 1 on the bundled
+    # heart swung 450 px at step 1 with the sudden load; ramped, it converges in 23 steps)
+    a = -(C_mod @ v) - K_mod @ x
     record(np.zeros_like(x), X1, T0)
     d0 = dist[0]
+    at_rest = equilibrium_tol * tgt.size / size  # a step this small moves nothing visible
     reason = "tolerance" if d0 <= tol_n else None
     current = X1 + nodes(Phi.dot(x))
     T = loads_rule.targets(current)  # weights of (20) from the current shape
@@ -300,7 +360,8 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
         new = X1 + nodes(Phi.dot(x_new))
         moved = np.abs(new - current).max()
         x, current = x_new, new
-        if not np.all(np.isfinite(x)) or _mean_distance(current, Y, pairs) > 10 * max(d0, 1):
+        if not np.all(np.isfinite(x)) or _mean_distance(current, Y, pairs) > 10 * max(
+                mean_dist[0], 1):
             raise MorphDivergedError(
                 f"the morph diverged at step {step} ({scheme} loads, k={k:g}, dt={dt:g}): "
                 + ("the explicit load is only conditionally stable; use scheme='implicit' "
@@ -312,29 +373,41 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False, k: float
             progress(step, dist[-1] * size)
         if dist[-1] <= tol_n:
             reason = "tolerance"
-        elif moved <= equilibrium_tol or (equilibrium_tol > 0 and step > _STALL and abs(
+        elif moved <= at_rest or (equilibrium_tol > 0 and step > _STALL and abs(
                 dist[-1 - _STALL] - dist[-1]) <= 1e-3 * dist[-1]):
             reason = "equilibrium"  # at rest, or the distance no longer decreases
         elif step == max_steps:
             reason = "max_steps"
 
     converged = reason == "tolerance"
-    final = dist[-1] * size
-    stop = (f"{reason}: mean distance {final:.4g} after {len(dist) - 1} steps "
-            f"(tolerance {tol_n * size:.4g})")
+    stop = _stop_sentence(reason, step, dist[-1] * size, tol_n * size, two_way)
     if not converged:
         log.info("morph stopped without reaching the tolerance: %s", stop)
-    params = dict(remove_rigid=remove_rigid, k=k, dt=dt, alpha=alpha, delta=delta,
+    params = dict(remove_rigid=remove_rigid, rotation=rotation, free_motion=free_motion,
+                  k=k, dt=dt, alpha=alpha, delta=delta,
                   damping=list(damping), c_x=c_x, c_v=c_v, material=material.name,
-                  E=material.E, nu=material.nu, rho=material.rho, sigma=sigma,
+                  E=material.E, nu=material.nu, rho=material.rho, sigma=model.sigma_rel,
                   modes=n_modes, model_nodes=model.m, solver=model.solver, scheme=scheme,
                   tol=tol, tol_distance=tol_distance,
                   max_steps=max_steps, equilibrium_tol=equilibrium_tol,
                   unmatched=unmatched, neighbours=neighbours)
     return Morph(shapes=np.array(shapes), loads=np.array(loads), energy=np.array(energy),
-                 node_energy=np.array(e_node), mean_distance=np.array(dist) * size,
+                 node_energy=np.array(e_node), mean_distance=np.array(mean_dist) * size,
                  matching=matching, similarity=similarity, converged=converged,
-                 stop_reason=stop, source=src, target=tgt, params=params)
+                 stop_reason=stop, source=src, target=tgt, params=params,
+                 distance=np.array(dist) * size)
+
+
+def _stop_sentence(reason: str, steps: int, final: float, tol: float, two_way: bool) -> str:
+    """``stop_reason``: one short sentence with the distance and its tolerance."""
+    what = ("mean distance of the matched nodes and both ways" if two_way else
+            "mean distance of the matched nodes")
+    where = f"{final:.3g} from the target ({what}; tolerance {tol:.3g}, input units)"
+    if reason == "tolerance":
+        return f"converged after {steps} steps: {where}"
+    if reason == "equilibrium":
+        return f"stopped at equilibrium after {steps} steps, {where}"
+    return f"stopped at max_steps={steps}, {where}"
 
 
 class _Field:
@@ -371,6 +444,37 @@ class _Field:
     def dense(self) -> np.ndarray:
         """``Phi`` itself, (d*m, n)."""
         return np.concatenate([b if self.g is None else self.g @ b for b in self.B])
+
+
+def _similarity_fields(points: np.ndarray) -> np.ndarray:
+    """Displacements of the nodes (m, d) under the infinitesimal similarity motions,
+    component-major (d*m, s): translations, dilation and rotations. In 2D every finite
+    similarity displacement ``(s R - I) X + t`` lies in their span; in 3D only small
+    rotations do."""
+    m, d = points.shape
+    fields = [np.kron(np.eye(d)[a], np.ones(m)) for a in range(d)]  # translations
+    fields.append(points.T.reshape(-1))  # dilation X
+    for a, b in ((0, 1),) if d == 2 else ((0, 1), (0, 2), (1, 2)):  # rotations
+        r = np.zeros((d, m))
+        r[a], r[b] = -points[:, b], points[:, a]
+        fields.append(r.reshape(-1))
+    return np.column_stack(fields)
+
+
+def _similarity_free(frequencies: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Modal stiffness with the similarity motions free: ``min_a (U - S a)^T K (U - S a)``.
+
+    ``B = Phi^T M S`` (n, s) are the modal coordinates of the similarity fields ``S``.
+    The elastic energy of ``U = Phi x`` less that of its best-fitting similarity part is
+    ``x^T Omega (I - P) Omega x`` with ``P`` the projector onto the columns of
+    ``Omega B``: positive semi-definite, zero on similarity motions.
+    """
+    W = frequencies[:, None] * B
+    U, sv, _ = np.linalg.svd(W, full_matrices=False)
+    U = U[:, sv > _RANK_TOL * sv.max()]
+    Om = np.diag(frequencies)
+    K = Om @ Om - (Om @ U) @ (U.T @ Om)
+    return (K + K.T) / 2
 
 
 def _frequency_range(K_mod):
@@ -416,7 +520,7 @@ def _mode_count(modes, total, *, sparse):
 
 
 def _check_options(*, k, dt, damping, scheme, tol, tol_distance, max_steps, neighbours,
-                   model_nodes, unmatched):
+                   model_nodes, unmatched, free_motion):
     if not np.isfinite(k) or k <= 0:
         raise ValueError(f"k must be a positive number, got {k}")
     if not np.isfinite(dt) or dt <= 0:
@@ -433,6 +537,8 @@ def _check_options(*, k, dt, damping, scheme, tol, tol_distance, max_steps, neig
         raise ValueError(f"max_steps must be a positive integer, got {max_steps}")
     if int(neighbours) != neighbours or neighbours < 1:
         raise ValueError(f"neighbours must be a positive integer, got {neighbours}")
+    if free_motion not in FREE_MOTIONS:
+        raise ValueError(f"free_motion must be one of {FREE_MOTIONS}, got {free_motion!r}")
     if unmatched not in UNMATCHED_RULES:
         raise ValueError(f"unmatched must be one of {UNMATCHED_RULES}, got {unmatched!r}")
     if int(model_nodes) != model_nodes or model_nodes < 3:

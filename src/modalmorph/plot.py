@@ -385,7 +385,8 @@ def plot_energy(morph, *, ax=None):
     Parameters
     ----------
     morph : Morph
-        A morph result: uses ``energy``, ``mean_distance`` and ``stop_reason``.
+        A morph result: uses ``energy``, ``distance`` (else ``mean_distance``) and
+        ``stop_reason``.
     ax : matplotlib Axes, optional
         Where to draw the energy; the distance goes on ``ax.twinx()``.
 
@@ -395,7 +396,8 @@ def plot_energy(morph, *, ax=None):
         The energy axes; the distance axes is its twin (the figure's last Axes).
     """
     energy = np.asarray(morph.energy, dtype=np.float64)
-    distance = np.asarray(morph.mean_distance, dtype=np.float64)
+    distance = getattr(morph, "distance", None)  # the stop test's, else matched nodes'
+    distance = np.asarray(morph.mean_distance if distance is None else distance, dtype=float)
     if ax is None:
         ax = _new_axes(2, figsize=(6.4, 4.0))
     from matplotlib.ticker import MaxNLocator
@@ -414,10 +416,12 @@ def plot_energy(morph, *, ax=None):
                           mfc="white", label="mean distance to target")
     twin.set_ylabel("mean distance to target")
     twin.set_ylim(bottom=0.0)
+    import textwrap
+
     status = "converged" if getattr(morph, "converged", False) else "not converged"
-    reason = getattr(morph, "stop_reason", "")
+    reason = textwrap.fill(getattr(morph, "stop_reason", "") or status, 70)
     _legend_above(ax, [e_line, d_line], [e_line.get_label(), d_line.get_label()],
-                  title=f"{status} ({reason})" if reason else status, title_fontsize="small")
+                  title=reason, title_fontsize="small")
     return ax
 
 
