@@ -178,7 +178,7 @@ def build_pairs(families, data: Path, glyph_nodes, quick: bool):
     return pairs
 
 
-def _picture(path: Path, a, b, matching, result) -> None:
+def _picture(path: Path, title: str, a, b, matching, result) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -186,12 +186,11 @@ def _picture(path: Path, a, b, matching, result) -> None:
 
     from modalmorph.plot import plot_matches, plot_shapes
 
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 5.5))
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 6.2))
     plot_matches(a, b, matching.pairs, ax=ax1)
-    ax1.set_title(f"{len(matching.pairs)} matches")
     plot_shapes(result, color_by="energy", ax=ax2)
-    ax2.set_title(f"{result.steps} steps, {result.stop_reason[:60]}", fontsize=8)
-    fig.suptitle(path.stem)
+    fig.suptitle(f"{title}\n{result.stop_reason}", fontsize=10)
+    fig.subplots_adjust(top=0.8)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -225,8 +224,9 @@ def run_pair(job) -> dict:
         rough=max((quality.roughness(s) for s in steps), default=0.0) / ends_rough,
         seconds=seconds)
     if picture_dir is not None:
-        safe = re.sub(r"[^A-Za-z0-9@.+-]+", "_", f"{family}-{name}")
-        _picture(Path(picture_dir) / f"{safe}.png", a, b, matching, result)
+        safe = re.sub(r"[^A-Za-z0-9@.+]+", "_", f"{family} {name}".replace("->", " to "))
+        _picture(Path(picture_dir) / f"{safe}.png", f"{family} {name}", a, b, matching,
+                 result)
     return row
 
 
@@ -239,13 +239,13 @@ def passes(row: dict) -> bool:
     return abs(row["rot"]) <= ROT_LIMIT and row["dmax"] <= DIST_LIMIT
 
 
-HEADER = (f"{'family':<13}{'name':<30}{'m':>5}{'n':>5}  {'status':<8}{'rot':>7}"
+HEADER = (f"{'family':<13}{'name':<34}{'m':>5}{'n':>5}  {'status':<8}{'rot':>7}"
           f"{'matched':>8}{'steps':>6}{'conv':>5}{'cross':>6}{'ends':>5}{'d_fwd':>7}"
           f"{'d_bwd':>7}{'dmax':>7}{'rough':>7}{'sec':>6}")
 
 
 def format_row(r: dict) -> str:
-    head = f"{r['family']:<13}{r['name']:<30}{r['m']:>5}{r['n']:>5}  "
+    head = f"{r['family']:<13}{r['name']:<34}{r['m']:>5}{r['n']:>5}  "
     if r["status"] != "ok":
         return head + f"{r['status']}  ({r['seconds']:.2f} s)"
     return head + (f"{'ok':<8}{r['rot']:>7.1f}{r['matched']:>8.2f}{r['steps']:>6}"
