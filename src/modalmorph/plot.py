@@ -765,6 +765,7 @@ def plot_track_curves(track, *, ax=None):
     ax.plot(frames, 100 * track.strain, color="black", lw=2.2, label="global")
     ax.axhline(0, color="0.7", lw=0.8)
     ax.set_xlabel("frame")
+    ax.xaxis.get_major_locator().set_params(integer=True)
     ax.set_ylabel("strain against frame 0 (%)")
     right = ax.twinx()
     right.plot(frames, track.cumulative_energy, color=TARGET_COLOR, ls="--", lw=1.5,
