@@ -1,0 +1,162 @@
+"""Quality measures: exact against brute force, invariants, known counts."""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from modalmorph.align import Similarity
+from modalmorph.quality import (
+    correspondence_rotation,
+    curve_distances,
+    roughness,
+    self_crossings,
+)
+from modalmorph.shape import resample
+
+from .conftest import random_rotation, self_intersections
+
+
+def brute_to_polyline(p, poly, closed):
+    """Distance from each row of p to every segment of poly, minimum: the reference."""
+    a = poly if closed else poly[:-1]
+    b = np.roll(poly, -1, axis=0)[:len(a)]
+    ab = b - a
+    t = np.einsum("mkd,kd->mk", p[:, None] - a[None], ab) / np.sum(ab * ab, axis=1)
+    foot = a[None] + np.clip(t, 0, 1)[..., None] * ab[None]
+    return np.linalg.norm(p[:, None] - foot, axis=-1).min(axis=1)
+
+
+def star_shaped(n, rng, spread=0.6):
+    """A random simple polygon: random radii at increasing angles."""
+    theta = np.sort(rng.uniform(0, 2 * np.pi, n))
+    r = 1 + spread * rng.uniform(-1, 1, n)
+    return np.c_[r * np.cos(theta), r * np.sin(theta)]
+
+
+def star_polygon(n, k):
+    """The regular star polygon {n/k}: n (k - 1) crossings."""
+    theta = 2 * np.pi * k * np.arange(n) / n
+    return np.c_[np.cos(theta), np.sin(theta)]
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("closed", [True, False])
+def test_curve_distances_match_brute_force(rng, dim, closed):
+    for trial in range(5):
+        # random walks with uneven steps: long segments beside short ones, sharp turns
+        steps = rng.standard_normal((60, dim)) * rng.exponential(1.0, (60, 1)) ** 2
+        b = np.cumsum(steps, axis=0)
+        a = b[rng.integers(0, 60, 40)] + rng.standard_normal((40, dim)) * (trial + 0.5)
+        d_ab, d_ba = curve_distances(a, b, closed_a=False, closed_b=closed)
+        assert_allclose(d_ab, brute_to_polyline(a, b, closed), atol=1e-12)  # exact
+        assert_allclose(d_ba, brute_to_polyline(b, a, False), atol=1e-12)
+
+
+def test_curve_distances_on_resampled_circle():
+    theta = np.linspace(0, 2 * np.pi, 400, endpoint=False)
+    b = np.c_[np.cos(theta), np.sin(theta)]
+    a = 1.1 * b[::7]
+    d_ab, d_ba = curve_distances(a, b)
+    # distance to the inscribed 400-gon: 1.1 - cos(pi/400) at most, 0.1 at the nodes
+    assert np.all((d_ab >= 0.1 - 1e-12) & (d_ab <= 0.1 + (1 - np.cos(np.pi / 400)) + 1e-12))
+    # from b to the 58-gon a: at least the gap at a's chord midpoints, at most 0.1
+    assert np.all((d_ba >= 1.1 * np.cos(7 * np.pi / 400) - 1 - 1e-12) & (d_ba <= 0.1 + 1e-12))
+
+
+def test_curve_distances_unordered_is_nearest_node(rng):
+    a, b = rng.standard_normal((30, 3)), rng.standard_normal((50, 3))
+    d_ab, d_ba = curve_distances(a, b, ordered=False)
+    full = np.linalg.norm(a[:, None] - b[None], axis=-1)
+    assert_allclose(d_ab, full.min(axis=1), atol=1e-12)
+    assert_allclose(d_ba, full.min(axis=0), atol=1e-12)
+
+
+def test_curve_distances_of_a_curve_to_itself_is_zero(hand200):
+    d_ab, d_ba = curve_distances(hand200, np.roll(hand200, 17, axis=0))
+    assert_allclose(d_ab, 0, atol=1e-9)  # the nodes lie on the polyline
+    assert_allclose(d_ba, 0, atol=1e-9)
+
+
+def test_curve_distances_validation():
+    with pytest.raises(ValueError, match="same dimension"):
+        curve_distances(np.zeros((3, 2)), np.zeros((3, 3)))
+    with pytest.raises(ValueError, match=r"b must have shape"):
+        curve_distances(np.zeros((3, 2)), np.zeros(4))
+
+
+def test_self_crossings_known_counts():
+    assert self_crossings(np.array([[0, 0], [1, 0], [1, 1], [0, 1]])) == 0  # square
+    assert self_crossings(np.array([[0, 0], [1, 1], [1, 0], [0, 1]])) == 1  # figure eight
+    assert self_crossings(np.array([[0, 0], [1, 0], [1, 1], [0, 1]]), closed=False) == 0
+    assert self_crossings(np.array([[0, 0], [1, 1], [1, 0], [0, 1]]), closed=False) == 1
+    for n, k in [(5, 2), (7, 2), (7, 3), (11, 4)]:
+        assert self_crossings(star_polygon(n, k)) == n * (k - 1)
+
+
+def test_self_crossings_simple_polygons_and_brute_force(rng, hand200):
+    assert self_crossings(hand200) == 0
+    for _ in range(5):
+        assert self_crossings(star_shaped(300, rng)) == 0
+        walk = np.cumsum(rng.standard_normal((80, 2)), axis=0)  # crosses itself often
+        for closed in (True, False):
+            assert self_crossings(walk, closed) == self_intersections(walk, closed=closed)
+
+
+def test_self_crossings_many_candidates(rng):
+    """More candidate pairs than one chunk (long horizontal zigzag): same as brute force."""
+    x = np.tile([0.0, 1.0], 800) + rng.uniform(-0.01, 0.01, 1600)
+    y = np.arange(1600) * 1e-3 + rng.uniform(-1e-2, 1e-2, 1600)
+    p = np.c_[x, y]
+    assert self_crossings(p, closed=False) == self_intersections(p, closed=False)
+
+
+def test_self_crossings_touching_does_not_count():
+    # a bow tie whose two loops touch at one node of a non-adjacent segment
+    p = np.array([[0, 0], [2, 0], [1, 0], [1, 1]])  # node 2 lies on segment 0
+    assert self_crossings(p, closed=False) == 0
+
+
+def test_roughness_invariant_to_pose_and_scale(hand200, rng):
+    r = roughness(hand200)
+    moved = Similarity(random_rotation(2, rng), 37.0, np.array([1e3, -5.0])).apply(hand200)
+    assert_allclose(roughness(moved), r, rtol=1e-9)  # a ratio of lengths
+    assert_allclose(roughness(np.roll(hand200, 50, axis=0)), r, rtol=2e-2)  # start node
+    p3 = np.c_[hand200, np.zeros(200)] @ random_rotation(3, rng).T
+    assert_allclose(roughness(p3), r, rtol=1e-9)
+
+
+def test_roughness_depends_little_on_node_count(hearts):
+    ed = hearts[0]
+    r = roughness(ed)
+    # the same outline at more nodes; measured: -10 % at 400, -2 % at 1000 (resampling
+    # twice cuts the corners of the staircase a little). Fewer nodes than the 247 pixel
+    # steps change the outline itself (the staircase goes): 0.0029 at 150.
+    for n in (400, 1000, 3000):
+        assert_allclose(roughness(resample(ed, n)), r, rtol=0.15)
+
+
+def test_roughness_of_circle_and_noise(rng):
+    theta = np.linspace(0, 2 * np.pi, 200, endpoint=False)
+    circle = np.c_[np.cos(theta), np.sin(theta)]
+    base = roughness(circle)
+    assert_allclose(base, 1 - np.exp(-(2 * np.pi * 4 / 512) ** 2 / 2), rtol=0.05)
+    noisy = circle + 0.01 * rng.standard_normal(circle.shape)  # 1 % of the radius
+    assert roughness(noisy) > 2 * base
+    line = np.c_[np.linspace(0, 1, 50), np.zeros(50)]
+    assert roughness(line, closed=False) < 1e-12  # an open straight line is smooth
+
+
+def test_correspondence_rotation(hand200, rng):
+    pairs = np.c_[np.arange(200), np.arange(200)]
+    for angle in (0.0, 30.0, -170.0, 180.0):
+        t = np.radians(angle)
+        R = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+        got = correspondence_rotation(hand200, 2.5 * hand200 @ R.T + 3.0, pairs)
+        assert_allclose(got, angle, atol=1e-9)  # Horn is exact on similar sets
+    R3 = random_rotation(3, rng)
+    p3 = rng.standard_normal((40, 3))
+    want = np.degrees(np.arccos((np.trace(R3) - 1) / 2))
+    got = correspondence_rotation(p3, p3 @ R3.T, np.c_[np.arange(40), np.arange(40)])
+    assert_allclose(got, want, atol=1e-7)
+    with pytest.raises(ValueError, match="pairs must be an integer array"):
+        correspondence_rotation(hand200, hand200, np.zeros((3, 2)))
