@@ -21,6 +21,7 @@ from scipy.spatial import cKDTree
 
 from .matching import match
 from .pipeline import Morph, MorphDivergedError, morph
+from .quality import curve_distances, self_crossings
 from .shape import Shape, as_shape
 
 __all__ = ["REFERENCES", "CORRESPONDENCES", "Track", "track", "curve_distance"]
@@ -327,44 +328,17 @@ def _segment_of_edge(shape: Shape, edges: np.ndarray, segments: int,
 
 def curve_distance(a: Shape, b: Shape) -> float:
     """Two-way distance between two objects: the larger of the mean distance of ``a``'s
-    nodes to ``b`` and of ``b``'s nodes to ``a``, where an ordered contour is its polyline
-    (distance to the nearest point of a segment) and anything else its nodes.
-    In the user's units."""
-    return max(_to_object(a.points, b), _to_object(b.points, a))
-
-
-def _to_object(x: np.ndarray, obj: Shape) -> float:
-    if not obj.ordered or obj.faces is not None:
-        return float(cKDTree(obj.points).query(x)[0].mean())
-    e = _edges(obj)
-    a, ab = obj.points[e[:, 0]], obj.points[e[:, 1]] - obj.points[e[:, 0]]
-    best = np.full(len(x), np.inf)
-    for lo in range(0, len(x), _CHUNK):  # point-to-segment distance, in chunks of nodes
-        ap = x[lo:lo + _CHUNK, None, :] - a[None]
-        t = np.clip(np.einsum("ijd,jd->ij", ap, ab) / np.einsum("jd,jd->j", ab, ab), 0, 1)
-        gap = ap - t[..., None] * ab
-        best[lo:lo + _CHUNK] = np.sqrt(np.einsum("ijd,ijd->ij", gap, gap).min(axis=1))
-    return float(best.mean())
-
-
-# Nodes per block of the point-to-segment distances (memory: CHUNK x edges x d floats).
-_CHUNK = 256
+    nodes to ``b`` and of ``b``'s nodes to ``a`` (to the polyline of an ordered contour,
+    to the nodes of anything else; :func:`modalmorph.quality.curve_distances`), in the
+    user's units."""
+    ordered = bool(a.ordered and b.ordered and a.faces is None and b.faces is None)
+    d_ab, d_ba = curve_distances(a.points, b.points, closed_a=a.closed, closed_b=b.closed,
+                                 ordered=ordered)
+    return float(max(d_ab.mean(), d_ba.mean()))
 
 
 def _crosses_itself(points: np.ndarray, first: Shape) -> bool:
-    """Whether a 2D contour (frame 0's topology on ``points``) has two non-adjacent edges
-    that intersect (orientation tests on every pair of edges)."""
+    """Whether a 2D contour (frame 0's topology on ``points``) crosses itself."""
     if points.shape[1] != 2 or not first.ordered:
         return False
-    e = _edges(first)
-    p, q = points[e[:, 0]], points[e[:, 1]]
-
-    def orient(a, b, c):  # sign of the turn a -> b -> c, for every pair of edges
-        return np.sign((b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1])
-                       - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
-
-    P, Q = p[:, None], q[:, None]
-    R, S = p[None], q[None]
-    cross = (orient(P, Q, R) * orient(P, Q, S) < 0) & (orient(R, S, P) * orient(R, S, Q) < 0)
-    share = (e[:, None, :, None] == e[None, :, None, :]).any(axis=(2, 3))
-    return bool((cross & ~share).any())
+    return self_crossings(points, closed=first.closed) > 0
