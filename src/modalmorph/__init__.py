@@ -15,6 +15,7 @@ from .material import MATERIALS, POLYETHYLENE, RUBBER, UNIT, Material
 from .modes import Modes, rayleigh
 from .pipeline import Morph, MorphDivergedError, morph
 from .shape import Shape, resample
+from .track import Track, track
 
 __all__ = [
     "DEFAULT_SIGMA",
@@ -29,6 +30,7 @@ __all__ = [
     "RUBBER",
     "Shape",
     "Similarity",
+    "Track",
     "UNIT",
     "__version__",
     "align",
@@ -37,4 +39,5 @@ __all__ = [
     "rayleigh",
     "read_shape",
     "resample",
+    "track",
 ]

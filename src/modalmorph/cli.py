@@ -1,4 +1,4 @@
-"""The ``modalmorph`` command line: ``demo``, ``match`` and ``morph``.
+"""The ``modalmorph`` command line: ``demo``, ``match``, ``morph`` and ``track``.
 
 Exit codes: 0 success, 2 bad input or usage (a one-line message naming the file and the
 problem), 1 a run that did not converge when ``--strict`` is given.
@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 from . import __version__
+from .track import CORRESPONDENCES, REFERENCES
 
 __all__ = ["main"]
 
@@ -96,13 +97,67 @@ def _parser() -> argparse.ArgumentParser:
                                        "write results, figures and an animation.")
     _add_inputs(morph)
     morph.add_argument("--out", type=Path, required=True, help="output folder")
-    morph.add_argument("--config", type=Path, default=None,
+    _add_morph_options(morph)
+    o = morph.add_argument_group("outputs")
+    o.add_argument("--no-figures", dest="figures", action="store_false",
+                   help="skip the PNG/SVG figures")
+    o.add_argument("--no-gif", dest="gif", action="store_false", help="skip the GIF")
+    o.add_argument("--mp4", action="store_true", help="also write an MP4 (needs ffmpeg)")
+    o.add_argument("--vtk", action="store_true",
+                   help="also write a VTK time series (.vtu + .pvd) for ParaView")
+    o.add_argument("--strict", action="store_true",
+                   help="exit with code 1 when the morph does not reach the tolerance")
+    morph.set_defaults(run=_run_morph)
+
+    track = sub.add_parser("track", parents=[common],
+                           help="follow the nodes of the first frame through a sequence",
+                           description="Follow the nodes of the first frame through a "
+                                       "sequence by morphing the tracked shape onto each "
+                                       "next frame; write trajectories, strain energy and "
+                                       "contour strain per frame, figures and an animation.")
+    track.add_argument("inputs", nargs="+", type=Path, metavar="INPUTS",
+                       help="the frames: several files, or one folder or glob pattern of "
+                            "images or CSVs (natural order), a multi-page TIFF, an (F, H, W) "
+                            "NPY stack of masks, an NPZ with an (F, n, d) array, or a CSV "
+                            "with a frame column")
+    track.add_argument("--nodes", type=int, default=None,
+                       help="resample 2D contours to this many nodes (default: as in the "
+                            "file; 200 for images)")
+    track.add_argument("--threshold", type=float, default=None,
+                       help="grey images: level separating object from background")
+    track.add_argument("--out", type=Path, required=True, help="output folder")
+    _add_morph_options(track)
+    t = track.add_argument_group("sequence")
+    t.add_argument("--reference", choices=REFERENCES, default="previous",
+                   help="previous (default): morph each tracked frame onto the next; "
+                        "first: morph frame 0 straight onto every frame")
+    t.add_argument("--correspondence", choices=CORRESPONDENCES, default="nearest",
+                   help="nearest (default): pairs in the images' common frame, for "
+                        "consecutive frames; modal: modal matching, for large motions")
+    t.add_argument("--cycle", action="store_true",
+                   help="periodic sequence (a cardiac cycle): also morph the last frame "
+                        "back onto the first and report the closure error")
+    t.add_argument("--segments", type=int, default=6,
+                   help="segments of equal arc length for the strain table (default 6)")
+    t.add_argument("--start-node", dest="start_node", type=int, default=0,
+                   help="node of the first frame where segment 1 starts (default 0)")
+    o = track.add_argument_group("outputs")
+    o.add_argument("--no-figures", dest="figures", action="store_false",
+                   help="skip the PNG figures")
+    o.add_argument("--no-gif", dest="gif", action="store_false", help="skip the GIF")
+    track.set_defaults(run=_run_track)
+    return parser
+
+
+def _add_morph_options(parser):
+    """The options of morph() (config file, matching, physics, loads, stopping)."""
+    parser.add_argument("--config", type=Path, default=None,
                        help="TOML file of options (same names as below, with underscores: "
                             "k = 50, remove_rigid = true, damping = [0.5, 1.0], ...); "
                             "options given on the command line win")
-    morph.add_argument("--method", choices=("auto", "local", "global"), default=None,
+    parser.add_argument("--method", choices=("auto", "local", "global"), default=None,
                        help="matching method (see 'modalmorph match --help')")
-    g = morph.add_argument_group("physics")
+    g = parser.add_argument_group("physics")
     g.add_argument("--material", default=None,
                    help="preset filling the objects: polyethylene (default, the paper's), "
                         "rubber or unit; or give --E, --nu, --rho")
@@ -119,7 +174,7 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--damping", type=float, nargs=2, metavar=("XI1", "XI2"), default=None,
                    help="damping ratios at the lowest and highest frequency (default 2 2, "
                         "twice critical: no overshoot; the paper used 0.005 0.03)")
-    d = morph.add_argument_group("loads and time integration")
+    d = parser.add_argument_group("loads and time integration")
     d.add_argument("--k", type=float, default=None,
                    help="spring stiffness pulling nodes to their targets, in units of one "
                         "node's own stiffness (default 100): larger pulls harder, needs "
@@ -149,7 +204,7 @@ def _parser() -> argparse.ArgumentParser:
                         "folds long unmatched runs")
     d.add_argument("--neighbours", type=int, default=None,
                    help="3D point sets: matched neighbours that pull an unmatched node")
-    s = morph.add_argument_group("stopping")
+    s = parser.add_argument_group("stopping")
     s.add_argument("--tol", type=float, default=None,
                    help="stop when matched nodes are this close to their partners on "
                         "average, as a fraction of the target's size (default 0.005)")
@@ -159,17 +214,6 @@ def _parser() -> argparse.ArgumentParser:
                    help="maximum number of time steps (default 100)")
     s.add_argument("--equilibrium-tol", dest="equilibrium_tol", type=float, default=None,
                    help="stop when no node moves more than this fraction of the size")
-    o = morph.add_argument_group("outputs")
-    o.add_argument("--no-figures", dest="figures", action="store_false",
-                   help="skip the PNG/SVG figures")
-    o.add_argument("--no-gif", dest="gif", action="store_false", help="skip the GIF")
-    o.add_argument("--mp4", action="store_true", help="also write an MP4 (needs ffmpeg)")
-    o.add_argument("--vtk", action="store_true",
-                   help="also write a VTK time series (.vtu + .pvd) for ParaView")
-    o.add_argument("--strict", action="store_true",
-                   help="exit with code 1 when the morph does not reach the tolerance")
-    morph.set_defaults(run=_run_morph)
-    return parser
 
 
 def _add_inputs(parser):
@@ -245,6 +289,48 @@ def _run_morph(args) -> int:
     return 1 if args.strict and not result.converged else 0
 
 
+def _run_track(args) -> int:
+    from .io import atomic_output_dir, read_frames, save_track
+    from .track import track
+
+    options = _load_config(args.config) if args.config else {}
+    for key in (*_MORPH_OPTIONS, *_OTHER_OPTIONS):
+        value = getattr(args, key, None)
+        if value is not None:
+            options[key] = value
+    frames = read_frames(args.inputs, threshold=options.get("threshold"),
+                         nodes=options.get("nodes"))
+    match_kw = {key: options[key] for key in ("method", "sigma") if key in options}
+    with _progress(len(frames.shapes) - 1, quiet=args.quiet, what="tracking") as progress:
+        result = track(frames.shapes, names=frames.names, reference=args.reference,
+                       correspondence=args.correspondence, cycle=args.cycle,
+                       segments=args.segments, start_node=args.start_node,
+                       match_options=match_kw if args.correspondence == "modal" else None,
+                       morph_options=_morph_kwargs(options),
+                       progress=None if progress is None else
+                       (lambda f, n: progress(f, None)))
+    with atomic_output_dir(args.out) as tmp:
+        save_track(result, tmp)
+        if args.figures or args.gif:
+            from . import plot
+
+            if args.figures:
+                plot.save_track_figures(result, tmp)
+            if args.gif:
+                plot.animate_track(result, tmp / "track.gif")
+        names = sorted(p.relative_to(tmp) for p in tmp.rglob("*") if p.is_file())
+    if not args.quiet:
+        worst = float(result.distance.max())
+        print(f"  {result.n_frames} frames of {result.points.shape[1]} nodes; largest "
+              f"distance to a frame {worst:.3g}; strain {result.strain.min():+.3f} .. "
+              f"{result.strain.max():+.3f}" + ("" if result.closure_error is None else
+                                               f"; closure error {result.closure_error:.3g}"),
+              file=sys.stderr)
+        for name in names:
+            print(f"  wrote {args.out / name}")
+    return 0
+
+
 def _run_demo(args) -> int:
     from .datasets import load_hand, load_heart
     from .shape import Shape, resample
@@ -273,18 +359,24 @@ def _morph(source, target, options, *, quiet: bool):
     from .matching import match
     from .pipeline import morph
 
-    kw = {key: options[key] for key in _MORPH_OPTIONS if key in options}
-    if "modes" in kw:
-        kw["modes"] = _parse_modes(kw["modes"])
-    if "damping" in kw:
-        kw["damping"] = tuple(kw["damping"])
-    kw["material"] = _material(options)
+    kw = _morph_kwargs(options)
     match_kw = {"method": options["method"]} if "method" in options else {}
     if "sigma" in options:
         match_kw["sigma"] = options["sigma"]
     matching = match(source, target, **match_kw)
     with _progress(kw.get("max_steps", 100), quiet=quiet) as progress:
         return morph(source, target, matching=matching, progress=progress, **kw)
+
+
+def _morph_kwargs(options) -> dict:
+    """Keyword arguments of morph() from the merged options (config file, command line)."""
+    kw = {key: options[key] for key in _MORPH_OPTIONS if key in options}
+    if "modes" in kw:
+        kw["modes"] = _parse_modes(kw["modes"])
+    if "damping" in kw:
+        kw["damping"] = tuple(kw["damping"])
+    kw["material"] = _material(options)
+    return kw
 
 
 def _material(options):
@@ -346,7 +438,7 @@ def _load_config(path: Path) -> dict:
 
 
 @contextlib.contextmanager
-def _progress(total: int, *, quiet: bool):
+def _progress(total: int, *, quiet: bool, what: str = "morphing"):
     """A rich progress bar on a terminal; nothing when quiet or not on a terminal."""
     if quiet or not sys.stderr.isatty():
         yield None
@@ -357,11 +449,11 @@ def _progress(total: int, *, quiet: bool):
         yield None
         return
     with Progress(transient=True) as bar:
-        task = bar.add_task("morphing", total=total)
+        task = bar.add_task(what, total=total)
 
         def update(step, distance):
-            bar.update(task, completed=step,
-                       description=f"morphing: step {step}, mean distance {distance:.3g}")
+            bar.update(task, completed=step, description=f"{what}: step {step}" + (
+                "" if distance is None else f", mean distance {distance:.3g}"))
 
         yield update
 

@@ -22,9 +22,11 @@ name, so the command line can print it as it is.
 from __future__ import annotations
 
 import dataclasses
+import glob
 import json
 import math
 import os
+import re
 import shutil
 import tempfile
 import warnings
@@ -39,11 +41,14 @@ from .shape import Shape, resample
 
 __all__ = [
     "DEFAULT_NODES",
+    "Frames",
     "SUPPORTED_EXTENSIONS",
     "atomic_output_dir",
     "atomic_write",
+    "read_frames",
     "read_shape",
     "save_result",
+    "save_track",
     "write_points",
 ]
 
@@ -430,8 +435,8 @@ def _check_svg_source(se, element, where: str) -> None:
 
 def _read_image(path: Path, name: str, threshold: float | None) -> np.ndarray:
     try:
+        import skimage.measure  # noqa: F401  (the contour of the mask, below)
         from PIL import Image, UnidentifiedImageError
-        from skimage.measure import find_contours
     except ImportError as exc:
         raise ImportError(f"reading images needs scikit-image and pillow ({exc}); install "
                           f"them with: pip install 'modalmorph[images]'") from None
@@ -443,6 +448,12 @@ def _read_image(path: Path, name: str, threshold: float | None) -> np.ndarray:
     except (OSError, UnidentifiedImageError, Image.DecompressionBombWarning,
             Image.DecompressionBombError, ValueError) as exc:
         raise ValueError(f"{name}: cannot read the image: {exc}") from None
+    return _image_contour(grey, name, threshold)
+
+
+def _image_contour(grey: np.ndarray, name: str, threshold: float | None) -> np.ndarray:
+    """The outer contour (m, 2) of the largest object of a 2D grey or mask array."""
+    from skimage.measure import find_contours
 
     levels = np.unique(grey)
     if threshold is None:
@@ -772,3 +783,221 @@ def atomic_output_dir(final_dir):
             os.replace(item, dest)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+# --------------------------------------------------------------------------------------
+# sequences
+
+
+@dataclasses.dataclass(frozen=True)
+class Frames:
+    """A sequence of shapes read from files, with a name per frame for messages.
+
+    Attributes
+    ----------
+    shapes : tuple of Shape
+        The frames in time order.
+    names : tuple of str
+        Where each frame came from: a file, ``file[page 3]``, ``file[3]`` or
+        ``file[frame 5]``.
+    """
+
+    shapes: tuple
+    names: tuple
+
+
+def read_frames(inputs, *, threshold: float | None = None,
+                nodes: int | None = None) -> Frames:
+    """Read a sequence of shapes (frames) from files.
+
+    Parameters
+    ----------
+    inputs : str, os.PathLike or a sequence of them
+        Either several files, one frame each (any format of :func:`read_shape`), or one of:
+
+        - a folder: its files with a supported extension (images or CSVs, ...), in natural
+          order (``frame2`` before ``frame10``);
+        - a glob pattern (``"masks/*.png"``), in natural order;
+        - a multi-page TIFF: one mask or grey image per page;
+        - an ``.npy`` file, or an ``.npz`` file's ``points`` (or only) array: an
+          (F, n, d) array of F shapes of n nodes (d = 2 or 3), or an (F, H, W) stack of
+          masks or grey images;
+        - a CSV/TSV/TXT file with a header naming a ``frame`` column and ``x``, ``y``
+          (``z``): one frame per value of ``frame``, in increasing order.
+    threshold : float, optional
+        Grey images: level separating the object from the background.
+    nodes : int, optional
+        Resample 2D contours to this many nodes (default: as in the file; 200 for images).
+
+    Returns
+    -------
+    Frames
+
+    Raises
+    ------
+    ValueError
+        When an input cannot be read, gives fewer than 2 frames, or a frame is not a valid
+        shape; the message starts with the frame's name (file, page or index).
+    """
+    paths = [inputs] if isinstance(inputs, str | os.PathLike) else list(inputs)
+    if not paths:
+        raise ValueError("inputs: no file given")
+    if len(paths) == 1:
+        names, shapes = _read_sequence(paths[0], threshold, nodes)
+    else:
+        names = [os.fspath(p) for p in paths]
+        shapes = [read_shape(p, threshold=threshold, nodes=nodes) for p in paths]
+    if len(shapes) < 2:
+        raise ValueError(f"{names[0] if names else os.fspath(paths[0])}: a sequence needs "
+                         f"at least 2 frames, got {len(shapes)}")
+    return Frames(shapes=tuple(shapes), names=tuple(names))
+
+
+def _natural_key(path) -> list:
+    """Sort key putting ``frame2`` before ``frame10``."""
+    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", os.fspath(path))]
+
+
+def _read_sequence(path, threshold, nodes):
+    name = os.fspath(path)
+    if any(c in name for c in "*?[") and not Path(path).exists():
+        files = sorted(glob.glob(name), key=_natural_key)
+        if not files:
+            raise ValueError(f"{name}: no file matches the pattern")
+        return files, [read_shape(f, threshold=threshold, nodes=nodes) for f in files]
+    path = Path(path)
+    if path.is_dir():
+        files = sorted((p for p in path.iterdir() if p.is_file() and not p.name.startswith(".")
+                        and p.suffix.lower() in SUPPORTED_EXTENSIONS), key=_natural_key)
+        if not files:
+            raise ValueError(f"{name}: no shape file in the folder (extensions: "
+                             f"{', '.join(SUPPORTED_EXTENSIONS)})")
+        return ([os.fspath(f) for f in files],
+                [read_shape(f, threshold=threshold, nodes=nodes) for f in files])
+    ext = path.suffix.lower()
+    if not path.exists() or path.stat().st_size == 0 or ext not in (*_ARRAY, *_TEXT,
+                                                                    ".tif", ".tiff"):
+        return [name], [read_shape(path, threshold=threshold, nodes=nodes)]
+    if ext in (".tif", ".tiff"):
+        pages = _tiff_pages(path, name)
+        if len(pages) == 1:
+            return [name], [read_shape(path, threshold=threshold, nodes=nodes)]
+        return _image_frames(pages, f"{name}[page {{}}]", threshold, nodes)
+    if ext in _TEXT:
+        return _csv_frames(path, name, nodes)
+    if ext == ".npy":  # a stack of masks may be boolean
+        array = _load_array(lambda p: np.load(p, allow_pickle=False), path, name, ".npy")
+        array = _numeric(name, array.astype(np.uint8) if array.dtype == bool else array,
+                         "the array")
+    else:
+        array = _read_npz(path, name)[0]
+    if array.ndim != 3:
+        return [name], [read_shape(path, threshold=threshold, nodes=nodes)]
+    if array.shape[-1] in (2, 3):  # (F, n, d): F shapes
+        if threshold is not None:
+            raise ValueError(f"{name}: threshold= applies to images, not to an (F, n, "
+                             f"{array.shape[-1]}) array of points")
+        names = [f"{name}[{f}]" for f in range(len(array))]
+        return names, [_make_shape(n, a, nodes=nodes) for n, a in zip(names, array,
+                                                                       strict=True)]
+    return _image_frames(list(array), f"{name}[{{}}]", threshold, nodes)
+
+
+def _tiff_pages(path: Path, name: str) -> list:
+    from PIL import Image, ImageSequence
+
+    try:
+        with Image.open(path) as image:
+            return [_grey_levels(page.copy()) for page in ImageSequence.Iterator(image)]
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{name}: cannot read the image: {exc}") from None
+
+
+def _image_frames(images, pattern: str, threshold, nodes):
+    names = [pattern.format(f) for f in range(len(images))]
+    shapes = [_make_shape(n, _image_contour(np.asarray(g), n, threshold),
+                          nodes=nodes or DEFAULT_NODES) for n, g in zip(names, images,
+                                                                          strict=True)]
+    return names, shapes
+
+
+def _csv_frames(path: Path, name: str, nodes):
+    """One frame per value of the ``frame`` column of a text file with a header."""
+    lines = [ln for ln in path.read_text(encoding="utf-8-sig").splitlines()
+             if ln.strip() and not ln.lstrip().startswith("#")]
+    sep = next((s for s in ("\t", ";", ",") if s in lines[0]), None)
+    header = [h.strip().strip("\"'").lower() for h in lines[0].split(sep)]
+    if "frame" not in header:
+        return [name], [read_shape(path, nodes=nodes)]
+    if "x" not in header or "y" not in header:
+        raise ValueError(f"{name}: a 'frame' column needs 'x' and 'y' columns too, got "
+                         f"{header}")
+    cols = [header.index(c) for c in ("frame", "x", "y", "z") if c in header]
+    rows = []
+    for lineno, line in enumerate(lines[1:], start=2):
+        parts = line.split(sep)
+        try:
+            rows.append([_parse_float(parts[c]) for c in cols])
+        except (ValueError, IndexError):
+            raise ValueError(f"{name}: data line {lineno}: cannot read the frame and "
+                             f"coordinates from {line.strip()!r}") from None
+    table = np.array(rows).reshape(-1, len(cols))
+    values = np.unique(table[:, 0])
+    names = [f"{name}[frame {v:g}]" for v in values]
+    return names, [_make_shape(n, table[table[:, 0] == v, 1:], nodes=nodes)
+                   for n, v in zip(names, values, strict=True)]
+
+
+def save_track(track, out_dir) -> None:
+    """Write a :class:`modalmorph.Track` into ``out_dir``, one file at a time (wrap the
+    call in :func:`atomic_output_dir` for all or nothing).
+
+    ``track.npz``
+        Arrays ``points`` (F, m, d) (the trajectories), ``energy``, ``cumulative_energy``,
+        ``strain``, ``distance`` (F,), ``node_energy`` (F, m), ``edges`` (e, 2),
+        ``edge_strain`` (F, e), ``segment_strain`` (F, S), ``segment_of_edge`` (e,),
+        ``crossed`` (F,).
+    ``track.json``
+        ``modalmorph_version``, ``parameters``, ``inputs`` (frame names), ``nodes``,
+        ``dim``, ``closure_error`` (or null) and ``frames``: per frame ``name``,
+        ``observed_nodes``, ``steps``, ``converged``, ``energy``, ``cumulative_energy``,
+        ``strain``, ``segment_strain``, ``distance``, ``crossed`` (frame 0: no morph,
+        ``steps`` 0).
+    ``strain_segments.csv``
+        One row per frame: ``frame,global,segment_1,...,segment_S``.
+    """
+    from . import __version__
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    frames = []
+    for f in range(track.n_frames):
+        run = track.morphs[f - 1] if f else None
+        frames.append({
+            "name": track.names[f], "observed_nodes": int(track.frames[f].m),
+            "steps": run.steps if run else 0, "converged": bool(run.converged) if run else True,
+            "energy": float(track.energy[f]),
+            "cumulative_energy": float(track.cumulative_energy[f]),
+            "strain": float(track.strain[f]),
+            "segment_strain": _finite_or_none(track.segment_strain[f]),
+            "distance": float(track.distance[f]), "crossed": bool(track.crossed[f])})
+    summary = {"modalmorph_version": __version__, "parameters": track.params,
+               "inputs": list(track.names), "nodes": int(track.points.shape[1]),
+               "dim": int(track.points.shape[2]), "closure_error": track.closure_error,
+               "frames": frames}
+    text = json.dumps(summary, indent=2, default=_json_default, allow_nan=False)
+    with atomic_write(out_dir / "track.json") as tmp:
+        tmp.write_text(text + "\n", encoding="utf-8")
+    with atomic_write(out_dir / "track.npz") as tmp:
+        np.savez_compressed(
+            tmp, points=track.points, energy=track.energy, node_energy=track.node_energy,
+            cumulative_energy=track.cumulative_energy, strain=track.strain,
+            distance=track.distance, edges=track.edges, edge_strain=track.edge_strain,
+            segment_strain=track.segment_strain, segment_of_edge=track.segment_of_edge,
+            crossed=track.crossed)
+    n_seg = track.segment_strain.shape[1]
+    table = np.column_stack([np.arange(track.n_frames), track.strain, track.segment_strain])
+    header = ",".join(["frame", "global", *[f"segment_{s + 1}" for s in range(n_seg)]])
+    with atomic_write(out_dir / "strain_segments.csv") as tmp:
+        np.savetxt(tmp, table, delimiter=",", header=header, comments="",
+                   fmt=["%d"] + ["%.6g"] * (1 + n_seg))

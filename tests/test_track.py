@@ -1,0 +1,211 @@
+"""track(): nodes of frame 0 followed through a sequence; readers and the command line."""
+
+import numpy as np
+import pytest
+
+from modalmorph import Shape, track
+from modalmorph.datasets import load_heart
+from modalmorph.shape import resample
+
+FRAMES = 20
+
+
+def periodic_field(points, t, centre, radius):
+    """A smooth periodic deformation: contraction by up to 25 % with a non-uniform part,
+    zero at t = 0 and t = FRAMES, largest at t = FRAMES / 2 (a cardiac-like cycle)."""
+    y = (points - centre) / radius
+    a = 0.5 * (1 - np.cos(2 * np.pi * t / FRAMES))
+    th = np.arctan2(y[:, 1], y[:, 0])
+    y = y * (1 - 0.25 * a) + 0.08 * a * np.c_[np.cos(2 * th) * y[:, 0], np.sin(th) * y[:, 1]]
+    return y * radius + centre
+
+
+def synthetic_sequence(m, rng):
+    """The heart's end-diastole contour deformed by ``periodic_field`` over 20 frames,
+    each frame resampled to a different node count from a different start point.
+    Returns the frames and the true positions of frame 0's nodes in every frame."""
+    ed = load_heart("diastole")
+    centre, radius = ed.mean(axis=0), np.sqrt(((ed - ed.mean(axis=0)) ** 2).sum(1).mean())
+    dense = resample(ed, 2000)
+    x0 = resample(ed, m)
+    frames, truth = [x0], [x0]
+    for f in range(1, FRAMES):
+        n = int(rng.integers(int(0.7 * m), int(1.4 * m)))
+        curve = np.roll(periodic_field(dense, f, centre, radius), rng.integers(2000), axis=0)
+        frames.append(resample(curve, n))
+        truth.append(periodic_field(x0, f, centre, radius))
+    return frames, np.array(truth), radius
+
+
+@pytest.mark.parametrize("m", [70, 200])
+def test_synthetic_sequence_follows_the_truth(m, rng):
+    frames, truth, radius = synthetic_sequence(m, rng)
+    result = track(frames, cycle=True)
+    spacing = np.linalg.norm(np.diff(frames[0], axis=0), axis=1).mean()
+    err = np.median(np.linalg.norm(result.points - truth, axis=2), axis=1)
+    # the issue's bar: within one node spacing (median) at every frame
+    # (measured max over frames: 0.46 at 70 nodes, 0.94 at 250)
+    assert np.all(err <= spacing), err / spacing
+    assert result.points.shape == (FRAMES, m, 2)
+    assert np.all(result.distance <= 0.01 * radius)  # stays on every frame's contour
+    assert not result.crossed.any()
+    # the cycle closes: nodes come back within one spacing of where they started
+    assert result.closure_error <= spacing
+    # contraction: every segment shortens at mid-cycle, the perimeter most there
+    assert np.all(result.segment_strain[FRAMES // 2] < 0)
+    assert np.argmin(result.strain) in range(FRAMES // 2 - 2, FRAMES // 2 + 3)
+    assert np.all(np.diff(result.cumulative_energy) >= 0)  # energies >= 0 (22)
+    assert np.all(result.energy >= 0)
+
+
+def test_track_invariants(hearts):
+    ed = resample(hearts[0], 60)
+    # a sequence of one object repeated: nothing moves, no energy, no strain
+    still = track([ed, ed, ed])
+    np.testing.assert_allclose(still.points, np.broadcast_to(ed, (3, 60, 2)), atol=1e-9)
+    np.testing.assert_allclose(still.strain, 0, atol=1e-9)
+    np.testing.assert_allclose(still.energy, 0, atol=1e-9)
+    # segments: 6 of equal arc length covering every edge once; strain of a uniform
+    # scaling by 0.8 is -0.2 everywhere (scaling about the centroid in the common frame)
+    scaled = (ed - ed.mean(0)) * 0.8 + ed.mean(0)
+    both = track([ed, scaled], start_node=7)
+    assert np.bincount(both.segment_of_edge).tolist() == [10] * 6
+    assert both.segment_of_edge[7] == 0 and both.segment_of_edge[6] == 5
+    np.testing.assert_allclose(both.strain[1], -0.2, atol=5e-3)  # morph tolerance 0.5 %
+    np.testing.assert_allclose(both.segment_strain[1], -0.2, atol=2e-2)
+
+
+def test_reference_first_and_modal(hearts):
+    ed, es = (Shape(resample(h, 80)) for h in hearts)
+    result = track([ed, es, ed], reference="first", correspondence="modal")
+    assert len(result.morphs) == 2
+    assert all(r.source is result.frames[0] or np.array_equal(r.source.points, ed.points)
+               for r in result.morphs)
+    assert result.strain[1] < 0  # the left ventricle shortens from ED to ES
+
+
+def test_errors_name_the_frame(hearts):
+    ed = resample(hearts[0], 60)
+    with pytest.raises(ValueError, match=r"frame 2 \(c\.csv\).*3D"):
+        track([ed, ed, np.c_[ed, ed[:, 0]]], names=["a.csv", "b.csv", "c.csv"])
+    with pytest.raises(ValueError, match=r"frame 1 \(frame 1\)"):
+        track([ed, ed[:2]])
+    with pytest.raises(ValueError, match="at least 2"):
+        track([ed])
+    with pytest.raises(ValueError, match="unknown option"):
+        track([ed, ed], morph_options={"kk": 1})
+    with pytest.raises(ValueError, match="reference"):
+        track([ed, ed], reference="last")
+    with pytest.raises(ValueError, match="start_node"):
+        track([ed, ed], start_node=60)
+    with pytest.raises(ValueError, match="correspondence='modal'"):
+        track([ed, ed], match_options={"method": "local"})
+
+
+# ------------------------------------------------------------------------- command line
+
+
+def horse_masks(frames=4):
+    """Masks of scikit-image's horse, squeezed a little more in every frame."""
+    skimage = pytest.importorskip("skimage")
+    from skimage import transform
+
+    horse = ~skimage.data.horse()
+    masks = []
+    for f in range(frames):
+        m = transform.rescale(horse.astype(float), (1, 1 - 0.03 * f), order=0) > 0.5
+        masks.append(np.pad(m, ((0, 0), (0, horse.shape[1] - m.shape[1]))))
+    return np.array(masks)
+
+
+def write_inputs(kind, tmp_path, masks):
+    from PIL import Image
+
+    images = [Image.fromarray(m.astype(np.uint8) * 255) for m in masks]
+    if kind == "png":
+        for f, image in enumerate(images):  # natural order: frame10 after frame2
+            image.save(tmp_path / f"frame{f * 5}.png")
+        return [tmp_path]
+    if kind == "tiff":
+        images[0].save(tmp_path / "stack.tif", save_all=True, append_images=images[1:])
+        return [tmp_path / "stack.tif"]
+    from modalmorph.io import read_frames
+
+    shapes = read_frames(list(tmp_path.glob("*.png")) or write_inputs("png", tmp_path, masks),
+                         nodes=60).shapes
+    np.savez(tmp_path / "seq.npz", points=np.array([s.points for s in shapes]))
+    return [tmp_path / "seq.npz"]
+
+
+@pytest.mark.parametrize("kind", ["png", "tiff", "npz"])
+def test_cli_track(kind, tmp_path):
+    from modalmorph.cli import main
+
+    masks = horse_masks()
+    inputs = write_inputs(kind, tmp_path, masks)
+    out = tmp_path / "out"
+    code = main(["track", *map(str, inputs), "--out", str(out), "--nodes", "60", "-q",
+                 *(["--no-gif"] if kind != "png" else [])])
+    assert code == 0
+    files = {p.name for p in out.iterdir()}
+    assert {"track.npz", "track.json", "strain_segments.csv", "trajectories.png",
+            "curves.png", "frames_energy.png"} <= files
+    assert ("track.gif" in files) == (kind == "png")
+    data = np.load(out / "track.npz")
+    assert data["points"].shape == (4, 60, 2)
+    assert np.all(data["strain"][1:] < 0)  # squeezed horizontally: the outline shortens
+    import json
+
+    summary = json.loads((out / "track.json").read_text())
+    assert len(summary["frames"]) == 4 and summary["nodes"] == 60
+    table = np.loadtxt(out / "strain_segments.csv", delimiter=",", skiprows=1)
+    assert table.shape == (4, 8)
+
+
+@pytest.mark.parametrize("bad, message", [
+    ("empty", r"frame1\.png: the file is empty"),
+    ("no_object", r"stack\.npy\[2\]: no object"),
+    ("mixed", r"frame 2 \(.*c\.csv\) is 3D"),
+])
+def test_cli_track_bad_input(bad, message, tmp_path, capsys, hearts):
+    from PIL import Image
+
+    from modalmorph.cli import main
+
+    masks = horse_masks(3)
+    if bad == "empty":
+        for f, m in enumerate(masks):
+            Image.fromarray(m.astype(np.uint8) * 255).save(tmp_path / f"frame{f}.png")
+        (tmp_path / "frame1.png").write_bytes(b"")
+        inputs = [tmp_path]
+    elif bad == "no_object":
+        masks[2] = False
+        np.save(tmp_path / "stack.npy", masks)
+        inputs = [tmp_path / "stack.npy"]
+    else:
+        ed = resample(hearts[0], 40)
+        for name, pts in (("a", ed), ("b", ed), ("c", np.c_[ed, ed[:, 0]])):
+            np.savetxt(tmp_path / f"{name}.csv", pts, delimiter=",")
+        inputs = [tmp_path / f"{n}.csv" for n in "abc"]
+    out = tmp_path / "out"
+    assert main(["track", *map(str, inputs), "--out", str(out), "-q"]) == 2
+    assert not out.exists()  # nothing written
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("modalmorph: error:")
+    assert __import__("re").search(message, err), err
+
+
+def test_real_cycle_ed_es_ed(hearts):
+    """The bundled slice's cycle ED -> ES -> ED (observed contours; the second ED resampled
+    to 1.3x the nodes from another start): the track stays on every contour, never crosses
+    itself, the ventricle shortens at ES and the nodes come back near their start."""
+    ed, es = hearts
+    ed2 = np.roll(resample(ed, int(1.3 * len(ed))), 17, axis=0)
+    result = track([ed, es, ed2])
+    radius = Shape(ed).size
+    assert np.all(result.distance <= 0.01 * radius)  # measured max 0.45 % on 15 slices
+    assert not result.crossed.any()
+    assert result.strain[1] < 0 and np.all(result.segment_strain[1] < 0)
+    spacing = np.linalg.norm(np.diff(ed, axis=0), axis=1).mean()
+    back = np.linalg.norm(result.points[2] - ed, axis=1).mean()
+    assert back <= spacing  # measured 0.41-0.93 spacings on the 15 shared slices
