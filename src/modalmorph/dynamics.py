@@ -84,6 +84,7 @@ class LoadTargets:
         self.partner = np.full(m, -1)
         self.partner[pairs[:, 0]] = pairs[:, 1]
         if ordered and rule == "arclength" and len(pairs) > 1:
+            self._release_shared()
             self._release_to_cover(closed, target_closed)
         un = np.flatnonzero(~self.matched)
         # For each unmatched node: its candidate target nodes (20), or its carriers.
@@ -105,6 +106,24 @@ class LoadTargets:
         less those freed to cover the target (:meth:`_release_to_cover`)."""
         idx = np.flatnonzero(self.matched)
         return np.c_[idx, self.partner[idx]]
+
+    def _release_shared(self) -> None:
+        """Keep one source node per target node: of consecutive matched nodes that share
+        a partner (a denser source), the middle one stays matched and the others join the
+        arclength rule, which spreads them between the neighbouring partners. Pulled onto
+        one point they would end with zero-length segments that fold."""
+        midx = np.flatnonzero(self.matched)
+        part = self.partner[midx]
+        start = np.r_[True, part[1:] != part[:-1]]
+        run = np.cumsum(start) - 1  # run id of each matched node (consecutive, same partner)
+        first = np.flatnonzero(start)
+        length = np.diff(np.r_[first, len(midx)])
+        keep = first + length // 2
+        free = np.ones(len(midx), bool)
+        free[keep] = False
+        free &= length[run] > 1
+        self.matched[midx[free]] = False
+        self.partner[midx[free]] = -1
 
     def _release_to_cover(self, closed: bool, target_closed: bool) -> None:
         """Free the matched nodes at the ends of target stretches that the source nodes

@@ -14,7 +14,7 @@ from .energy import node_energy
 from .material import POLYETHYLENE, Material
 from .modes import rayleigh
 from .quality import curve_distances
-from .shape import Shape, as_shape, coarsen, spread_indices
+from .shape import Shape, as_shape, coarsen, resample
 
 __all__ = ["Morph", "MorphDivergedError", "morph"]
 
@@ -64,11 +64,10 @@ class Morph:
         freed to cover unpaired stretches of the target) and the distances both ways
         between the shape and the target curve, so that every stretch of the target
         counts, paired or not: the mean distance of the shape's nodes to the target
-        polyline, and of the target's nodes to the shape's polyline less what any shape
-        of the source's node count leaves there (a polygon on ``m`` of the target's nodes
-        spread evenly: zero when ``m >= n``; a coarser source cannot follow every corner
-        of a finer target). For point sets: the mean distance of the nodes pulled to
-        partners.
+        polyline, and of the target's nodes to the shape's polyline less what a shape of
+        the source's node count leaves there (the target resampled evenly by arc length
+        at ``m`` nodes: a source no finer than the target cannot follow its every
+        corner). For point sets: the mean distance of the nodes pulled to partners.
     matching : Matching
         The correspondences used.
     similarity : Similarity or None
@@ -107,7 +106,7 @@ class Morph:
 def morph(source, target, *, matching=None, remove_rigid: bool = False,
           rotation: str = "auto", free_motion: str = "similarity", k: float = 100.0,
           dt: float = 0.1, alpha: float = 0.25, delta: float = 0.5,
-          damping: tuple[float, float] = (2.0, 2.0), c_x: float = 0.0, c_v: float = 0.0,
+          damping: float | tuple[float, float] = 1.0, c_x: float = 0.0, c_v: float = 0.0,
           material: Material = POLYETHYLENE, sigma: float | None = None,
           modes: int | float | None = None, solver: str = "auto", model_nodes: int = 300,
           scheme: str = "implicit", tol: float = 0.005,
@@ -157,12 +156,17 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
         Newmark's parameters (14). ``delta=0.5`` has no numerical damping; ``delta > 0.5``
         damps (first-order accurate), best with ``alpha=(delta+0.5)**2/4`` (16). Must
         satisfy ``2 alpha >= delta >= 0.5``.
-    damping : (float, float), optional
-        Damping ratios (fractions of critical) at the lowest and highest frequencies of the
-        loaded model (elastic stiffness plus springs), giving Rayleigh's
-        ``C = a M + b K`` (5). The paper used 0.005-0.03, which leaves the shape
-        oscillating about the target for many steps; the default (2, 2), twice critical,
-        makes the shape approach the target without overshoot (measured on the hands).
+    damping : float or (float, float), optional
+        Rayleigh damping ``C = a M + b K`` (5) of the loaded model (elastic stiffness plus
+        springs). A pair: the damping ratios (fractions of critical) at its lowest and
+        highest frequencies; the paper used 0.005-0.03, which leaves the shape oscillating
+        about the target for many steps. A number (default 1): the ratio at the springs'
+        frequency, growing in proportion to the frequency above it (stiffness-
+        proportional), so that every mode creeps to the target at nearly the same rate
+        and the shape moves along nearly straight paths. Measured on the shared hearts:
+        with the former default (2, 2) the stiff modes raced ahead of the soft ones, and
+        intermediate shapes were up to 1.9x rougher than either end and folded on 8 of 16
+        pairs (and on a heart shrunk 1000x); with 1, none.
     c_x, c_v : float, optional
         Initial displacement as a fraction of the load (17), (21) and initial velocity
         ``c_v`` times it (18). Larger values start faster.
@@ -292,7 +296,10 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
     PtP = Phi.gram()
     K_mod = K_el + (k_abs * PtP if scheme == "implicit" else 0.0)
     w_lo, w_hi = _frequency_range(K_mod)
-    a_r, b_r = rayleigh(*damping, w_lo, w_hi)
+    if np.ndim(damping) == 0:  # every mode approaches at nearly the springs' one rate
+        a_r, b_r = _uniform_damping(float(damping), k_abs * np.trace(PtP) / len(w2), w_lo)
+    else:  # (5) through two ratios, as the paper
+        a_r, b_r = rayleigh(*damping, w_lo, w_hi)
     C_mod = a_r * np.eye(len(w2)) + b_r * K_mod  # (5) on the loaded model
     integrator = Newmark(K_mod, C_mod, dt_abs, alpha, delta)
 
@@ -307,11 +314,9 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
     shapes, loads, energy, e_node, mean_dist, dist = [], [], [], [], [], []
     two_way = bool(work.ordered and tgt.ordered)
     pulled = loads_rule.pairs  # the pairs the springs (19) pull together
-    if two_way:  # what the best m-node shape on the target leaves: its nodes on m of the
-        # target's, spread evenly; the other target nodes lie off its chords (0 if m >= n)
-        on = Y[spread_indices(tgt, m)]
-        floor = float(curve_distances(on, Y, closed_a=tgt.closed, closed_b=tgt.closed)[1]
-                      .mean())
+    if two_way:  # what an m-node shape spread evenly along the target leaves off it
+        floor = float(curve_distances(resample(Y, m, closed=tgt.closed), Y,
+                                      closed_a=tgt.closed, closed_b=tgt.closed)[1].mean())
 
     def distance(current):  # the stop test's measure, normalised units
         near = _mean_distance(current, Y, pulled)
@@ -385,7 +390,7 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
         log.info("morph stopped without reaching the tolerance: %s", stop)
     params = dict(remove_rigid=remove_rigid, rotation=rotation, free_motion=free_motion,
                   k=k, dt=dt, alpha=alpha, delta=delta,
-                  damping=list(damping), c_x=c_x, c_v=c_v, material=material.name,
+                  damping=np.asarray(damping).tolist(), c_x=c_x, c_v=c_v, material=material.name,
                   E=material.E, nu=material.nu, rho=material.rho, sigma=model.sigma_rel,
                   modes=n_modes, model_nodes=model.m, solver=model.solver, scheme=scheme,
                   tol=tol, tol_distance=tol_distance,
@@ -444,6 +449,18 @@ class _Field:
     def dense(self) -> np.ndarray:
         """``Phi`` itself, (d*m, n)."""
         return np.concatenate([b if self.g is None else self.g @ b for b in self.B])
+
+
+def _uniform_damping(xi: float, spring: float, w_lo: float) -> tuple[float, float]:
+    """Rayleigh coefficients ``(a, b)`` (5) of the default damping: ``b = 2 xi / w_s``
+    with ``w_s^2`` the springs' mean modal stiffness, so that a mode of loaded frequency
+    ``w >= w_s`` has the ratio ``xi w / w_s``: overdamped modes then creep towards the
+    target at nearly one rate (``~1 / b``), and the shape moves along nearly straight
+    paths, with no mode racing ahead (ripples, folds); ``a`` lifts the softest loaded
+    mode to ``xi`` when it lies below ``w_s``."""
+    w_s = np.sqrt(spring)
+    b = 2 * xi / w_s
+    return max(0.0, 2 * w_lo * (xi - b * w_lo / 2)), b
 
 
 def _similarity_fields(points: np.ndarray) -> np.ndarray:
@@ -525,8 +542,9 @@ def _check_options(*, k, dt, damping, scheme, tol, tol_distance, max_steps, neig
         raise ValueError(f"k must be a positive number, got {k}")
     if not np.isfinite(dt) or dt <= 0:
         raise ValueError(f"dt must be a positive number, got {dt}")
-    if len(damping) != 2 or min(damping) < 0:
-        raise ValueError(f"damping must be two ratios >= 0, got {damping}")
+    if not (np.ndim(damping) == 0 and np.isfinite(damping) and damping > 0 or np.shape(
+            damping) == (2,) and np.all(np.isfinite(damping)) and min(damping) >= 0):
+        raise ValueError(f"damping must be a ratio > 0 or two ratios >= 0, got {damping!r}")
     if scheme not in ("implicit", "explicit"):
         raise ValueError(f"scheme must be 'implicit' or 'explicit', got {scheme!r}")
     if not tol > 0:
