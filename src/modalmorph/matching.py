@@ -31,6 +31,7 @@ from scipy.spatial import cKDTree
 
 from .align import Similarity, align
 from .element import FEModel
+from .match3d import match_cloud
 from .shape import Shape, as_shape, resample, spread_indices
 
 __all__ = ["Matching", "match", "modal_features", "affinity", "METHODS"]
@@ -580,7 +581,7 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
 
 
 def _match_large(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: float,
-                 coarse: int) -> tuple[np.ndarray, np.ndarray, Similarity]:
+                 coarse: int) -> tuple[np.ndarray, np.ndarray, Similarity, np.ndarray]:
     """The default matcher for large objects, in memory linear in the node counts.
 
     Both objects are matched on ``coarse`` nodes spread evenly over them; every source
@@ -589,7 +590,8 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: flo
     lands (k-d trees); pairs farther than ``sqrt(reject)`` coarse target spacings are
     dropped.
     The correspondence is as good as the coarse one: within about one coarse spacing
-    along a contour, not one node of the dense sampling.
+    along a contour, not one node of the dense sampling. Also returns where every source
+    node lands (the target's user coordinates), shape (m, d).
     """
     ci, cj = spread_indices(src, coarse), spread_indices(tgt, coarse)
     sub_s = Shape(src.points[ci], closed=src.closed, ordered=src.ordered)
@@ -605,7 +607,7 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: flo
     cost = (gap / h) ** 2  # in squared coarse target spacings, as on the coarse level
     keep = cost <= reject
     pairs = np.c_[np.flatnonzero(keep), j[keep]]
-    return pairs, cost[keep], align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]])
+    return pairs, cost[keep], align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]]), landed
 
 
 def match(source, target, *, method: str = "auto", modes: int | None = None,
@@ -668,8 +670,10 @@ def match(source, target, *, method: str = "auto", modes: int | None = None,
         raise ValueError(f"reject must be > 0, got {reject}")
     sim = None
     reject_auto = _REJECT if reject is None else reject
-    if method == "auto" and max(src.m, tgt.m) > LARGE:
-        pairs, cost, sim = _match_large(src, tgt, n_modes, sigma, reject_auto, COARSE)
+    if method == "auto" and src.dim == 3 and not (src.ordered or tgt.ordered):
+        pairs, cost, sim = match_cloud(src, tgt, n_modes, sigma, reject_auto)
+    elif method == "auto" and max(src.m, tgt.m) > LARGE:
+        pairs, cost, sim, _ = _match_large(src, tgt, n_modes, sigma, reject_auto, COARSE)
     elif method == "auto":
         pairs, cost, sim, _ = _match_auto(src, tgt, n_modes, sigma, reject_auto)
     else:
