@@ -31,6 +31,7 @@ from scipy.spatial import cKDTree
 
 from .align import Similarity, align
 from .element import FEModel, auto_sigma, check_sigma
+from .match3d import refine
 from .shape import Shape, as_shape, resample, spread_indices
 
 __all__ = ["Matching", "match", "modal_features", "affinity", "METHODS", "ROTATIONS"]
@@ -669,7 +670,7 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
 
 def _match_large(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: float,
                  coarse: int, *, rotation: str = "auto"
-                 ) -> tuple[np.ndarray, np.ndarray, Similarity]:
+                 ) -> tuple[np.ndarray, np.ndarray, Similarity, np.ndarray]:
     """The default matcher for large objects, in memory linear in the node counts.
 
     Both objects are matched on ``coarse`` nodes spread evenly over them; every source
@@ -678,7 +679,8 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: flo
     lands (k-d trees); pairs farther than ``sqrt(reject)`` coarse target spacings are
     dropped.
     The correspondence is as good as the coarse one: within about one coarse spacing
-    along a contour, not one node of the dense sampling.
+    along a contour, not one node of the dense sampling. Also returns where every source
+    node lands (the target's user coordinates), shape (m, d).
     """
     ci, cj = spread_indices(src, coarse), spread_indices(tgt, coarse)
     sub_s = Shape(src.points[ci], closed=src.closed, ordered=src.ordered)
@@ -692,6 +694,25 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: flo
     gap = np.linalg.norm(tgt.points[j] - landed, axis=1)
     h = tgt.spacing * tgt.size * tgt.m / len(cj)  # the coarse target's node spacing
     cost = (gap / h) ** 2  # in squared coarse target spacings, as on the coarse level
+    keep = cost <= reject
+    pairs = np.c_[np.flatnonzero(keep), j[keep]]
+    return pairs, cost[keep], align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]]), landed
+
+
+def _match_cloud(src: Shape, tgt: Shape, n_modes: int, sigma: float | None, reject: float,
+                 rotation: str) -> tuple[np.ndarray, np.ndarray, Similarity]:
+    """The default matcher for unordered 3D point sets: the modal matcher (on ``COARSE``
+    nodes for large objects), then :func:`modalmorph.match3d.refine`, then each source
+    node paired with the target node nearest to where it lands; pairs farther than
+    ``sqrt(reject)`` target spacings are dropped. Cost in squared target spacings."""
+    if max(src.m, tgt.m) > LARGE:
+        *_, landed = _match_large(src, tgt, n_modes, sigma, reject, COARSE, rotation=rotation)
+    else:
+        *_, landed = _match_auto(src, tgt, n_modes, sigma, reject, rotation=rotation)
+    y = tgt.normalized
+    z = refine(src.normalized, tgt.to_normalized(landed), y, min(src.m, COARSE) // 4)
+    gap, j = cKDTree(y).query(z)
+    cost = (gap / tgt.spacing) ** 2
     keep = cost <= reject
     pairs = np.c_[np.flatnonzero(keep), j[keep]]
     return pairs, cost[keep], align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]])
@@ -770,9 +791,11 @@ def match(source, target, *, method: str = "auto", rotation: str = "auto",
         raise ValueError(f"reject must be > 0, got {reject}")
     sim = None
     reject_auto = _REJECT if reject is None else reject
-    if method == "auto" and max(src.m, tgt.m) > LARGE:
-        pairs, cost, sim = _match_large(src, tgt, n_modes, sigma, reject_auto, COARSE,
-                                        rotation=rotation)
+    if method == "auto" and src.dim == 3 and not (src.ordered or tgt.ordered):
+        pairs, cost, sim = _match_cloud(src, tgt, n_modes, sigma, reject_auto, rotation)
+    elif method == "auto" and max(src.m, tgt.m) > LARGE:
+        pairs, cost, sim, _ = _match_large(src, tgt, n_modes, sigma, reject_auto, COARSE,
+                                           rotation=rotation)
     elif method == "auto":
         pairs, cost, sim, _ = _match_auto(src, tgt, n_modes, sigma, reject_auto,
                                           rotation=rotation)

@@ -1,0 +1,183 @@
+"""3D correspondence on scanned and procedural surfaces: modalmorph against CPD (issue 16).
+
+Each case is a surface sampled evenly (area-weighted random points on its faces) at
+``m`` points: the source. The target is the same points moved by a smooth random warp
+(displacements of 5-15 % of the size), turned by ``angle`` degrees about a random axis,
+with Gaussian noise (``--noise``, a fraction of the size), of which a random 80 % is kept,
+shuffled. The ground truth of source point ``i`` is where the warp and turn take it
+(without the noise). A pair's error is the distance from the target point it names to
+that true position, in units of the target's mean nearest-neighbour spacing.
+
+Shapes:
+
+- ``bunny``: the Stanford bunny (Stanford 3D Scanning Repository; public domain), the
+  1839-vertex, 3674-face mesh of the npm package ``bunny`` 1.0.1, stored in
+  ``benchmarks/data/bunny.npz`` (40 KB).
+- ``blob``: the asymmetric bumpy ellipsoid of ``benchmarks/scale.py`` (procedural),
+  sampled through uniform points on the sphere.
+
+Columns: med/p90 (median and 90th percentile error of the pairs returned), paired (the
+fraction of source points given a partner), <=1 / <=3 (fraction of source points whose
+pair is within 1 and 3 spacings; unpaired points count as wrong), time and peak
+memory (each case in its own process: peak resident set size of the child, MB).
+
+Run ``python benchmarks/match3d.py`` for the whole table (CPD only up to ``--cpd-up-to``
+points, each case limited by ``--timeout`` seconds), or
+``--sizes 2000 --angles 0,180 --shapes bunny`` for part of it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+DATA = Path(__file__).parent / "data" / "bunny.npz"
+KEEP = 0.8  # fraction of the target's points kept
+WARP = (0.05, 0.15)  # largest displacement of the warp, fraction of the size
+
+
+def bunny_mesh() -> tuple[np.ndarray, np.ndarray]:
+    with np.load(DATA) as f:
+        return f["positions"].astype(np.float64), f["faces"].astype(np.intp)
+
+
+def sample_mesh(points: np.ndarray, faces: np.ndarray, m: int, rng) -> np.ndarray:
+    """``m`` points on a triangle mesh, uniform by area."""
+    a, b, c = (points[faces[:, k]] for k in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    f = rng.choice(len(faces), size=m, p=area / area.sum())
+    u, v = rng.random((2, m))
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    return a[f] + u[:, None] * (b[f] - a[f]) + v[:, None] * (c[f] - a[f])
+
+
+def sample_blob(m: int, rng) -> np.ndarray:
+    p = rng.normal(size=(m, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    p *= [1.0, 0.7, 0.5]  # the ellipsoid of benchmarks/model.py, with its bump on top
+    p += 0.3 * np.exp(-np.sum((p - [0, 0, 0.5]) ** 2, axis=1) / 0.1)[:, None] * [0, 0, 1]
+    c = np.array([0.55, 0.45, -0.2])  # and scale.py's second bump, off every axis
+    return p + 0.25 * np.exp(-np.sum((p - c) ** 2, axis=1) / 0.1)[:, None] * c
+
+
+def warp(p: np.ndarray, rng) -> np.ndarray:
+    """A smooth random displacement field: 6 Gaussian bumps of width 0.3-0.6 x the size,
+    scaled so that the largest displacement is 5-15 % of the size."""
+    c = p.mean(axis=0)
+    size = np.sqrt(np.mean(np.sum((p - c) ** 2, axis=1)))
+    centres = p[rng.choice(len(p), 6, replace=False)]
+    width = size * rng.uniform(0.3, 0.6, 6)
+    dirs = rng.normal(size=(6, 3))
+    u = sum(np.exp(-np.sum((p - centres[k]) ** 2, axis=1) / (2 * width[k] ** 2))[:, None]
+            * dirs[k] for k in range(6))
+    u *= rng.uniform(*WARP) * size / np.linalg.norm(u, axis=1).max()
+    return p + u
+
+
+def make_case(shape: str, m: int, angle: float, noise: float, seed: int = 0):
+    """Source (m, 3), target (n, 3), truth (m, 3): where each source point belongs."""
+    rng = np.random.default_rng([seed, m, int(angle)])
+    src = sample_mesh(*bunny_mesh(), m, rng) if shape == "bunny" else sample_blob(m, rng)
+    size = np.sqrt(np.mean(np.sum((src - src.mean(axis=0)) ** 2, axis=1)))
+    axis = rng.normal(size=3)
+    rot = Rotation.from_rotvec(np.deg2rad(angle) * axis / np.linalg.norm(axis))
+    truth = rot.apply(warp(src, rng)) + size * rng.normal(size=3)
+    tgt = truth + noise * size * rng.normal(size=truth.shape)
+    keep = rng.permutation(m)[: int(round(KEEP * m))]
+    return src, tgt[keep], truth
+
+
+def errors(src, tgt, truth, pairs) -> tuple[np.ndarray, float]:
+    """Per source point: the error of its pair in target spacings (inf: unpaired)."""
+    h = cKDTree(tgt).query(tgt, k=2)[0][:, 1].mean()
+    err = np.full(len(src), np.inf)
+    err[pairs[:, 0]] = np.linalg.norm(tgt[pairs[:, 1]] - truth[pairs[:, 0]], axis=1) / h
+    return err, h
+
+
+def run_modalmorph(src, tgt):
+    import modalmorph as mm
+    return mm.match(src, tgt).pairs
+
+
+def run_cpd(src, tgt):
+    """pycpd's deformable registration (defaults: beta 2, lambda 2), then each moved source
+    point paired with its nearest target point."""
+    from pycpd import DeformableRegistration
+    moved, _ = DeformableRegistration(X=tgt, Y=src).register()
+    return np.c_[np.arange(len(src)), cKDTree(tgt).query(moved)[1]]
+
+
+def one(method: str, shape: str, m: int, angle: float, noise: float) -> dict:
+    src, tgt, truth = make_case(shape, m, angle, noise)
+    t0 = time.perf_counter()
+    pairs = (run_modalmorph if method == "modalmorph" else run_cpd)(src, tgt)
+    seconds = time.perf_counter() - t0
+    err, _ = errors(src, tgt, truth, pairs)
+    paired = err[np.isfinite(err)]
+    return dict(med=float(np.median(paired)), p90=float(np.percentile(paired, 90)),
+                paired=len(paired) / len(err), w1=float(np.mean(err <= 1)),
+                w3=float(np.mean(err <= 3)), s=seconds,
+                peak=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+
+
+def child(args, method, shape, m, angle) -> dict | str:
+    cmd = [sys.executable, __file__, "--child", method, shape, str(m), str(angle),
+           str(args.noise)]
+    try:
+        out = subprocess.run(cmd, capture_output=True, text=True, timeout=args.timeout)
+    except subprocess.TimeoutExpired:
+        return "timeout"
+    if out.returncode:
+        return "out of memory" if "MemoryError" in out.stderr else "failed"
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--child", nargs=5, help=argparse.SUPPRESS)
+    p.add_argument("--shapes", default="bunny,blob")
+    p.add_argument("--sizes", default="500,2000,10000,50000,100000")
+    p.add_argument("--angles", default="0,30,90,180")
+    p.add_argument("--methods", default="modalmorph,cpd")
+    p.add_argument("--noise", type=float, default=0.01, help="fraction of the size")
+    p.add_argument("--cpd-up-to", type=int, default=10000)
+    p.add_argument("--timeout", type=float, default=600.0)
+    args = p.parse_args(argv)
+    if args.child:
+        method, shape, m, angle, noise = args.child
+        print(json.dumps(one(method, shape, int(m), float(angle), float(noise))))
+        return 0
+    print(f"# noise {args.noise} x size, {KEEP:.0%} of the target kept, warp "
+          f"{WARP[0]:.0%}-{WARP[1]:.0%}; error in target spacings; peak RSS in MB")
+    print(f"{'shape':>6} {'points':>7} {'angle':>5} {'method':>10} {'med':>6} {'p90':>6} "
+          f"{'paired':>6} {'<=1':>5} {'<=3':>5} {'time s':>7} {'peak':>6}", flush=True)
+    for shape in args.shapes.split(","):
+        for m in map(int, args.sizes.split(",")):
+            for angle in map(float, args.angles.split(",")):
+                for method in args.methods.split(","):
+                    if method == "cpd" and m > args.cpd_up_to:
+                        continue
+                    r = child(args, method, shape, m, angle)
+                    head = f"{shape:>6} {m:>7} {angle:>5.0f} {method:>10}"
+                    if isinstance(r, str):
+                        print(f"{head} {r:>6}", flush=True)
+                        continue
+                    print(f"{head} {r['med']:>6.2f} {r['p90']:>6.2f} {r['paired']:>6.2f} "
+                          f"{r['w1']:>5.2f} "
+                          f"{r['w3']:>5.2f} {r['s']:>7.2f} {r['peak']:>6.0f}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

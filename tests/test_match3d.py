@@ -1,0 +1,61 @@
+"""The 3D point-set matcher (issue 16): warped, turned, noisy, subsampled, shuffled copies
+with a known ground truth."""
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+import modalmorph as mm
+
+
+def blob(m, rng):
+    """An asymmetric bumpy ellipsoid, as in benchmarks/match3d.py, (m, 3)."""
+    p = rng.normal(size=(m, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    p *= [1.0, 0.7, 0.5]
+    p += 0.3 * np.exp(-np.sum((p - [0, 0, 0.5]) ** 2, axis=1) / 0.1)[:, None] * [0, 0, 1]
+    c = np.array([0.55, 0.45, -0.2])
+    return p + 0.25 * np.exp(-np.sum((p - c) ** 2, axis=1) / 0.1)[:, None] * c
+
+
+def case(m, angle, noise, seed=0):
+    """Source, target (80 % of the points, shuffled) and the true positions (m, 3)."""
+    rng = np.random.default_rng(seed)
+    src = blob(m, rng)
+    bumps = src[rng.choice(m, 4, replace=False)]
+    dirs = rng.normal(size=(4, 3))
+    u = sum(np.exp(-np.sum((src - c) ** 2, axis=1) / (2 * 0.4**2))[:, None] * v
+            for c, v in zip(bumps, dirs, strict=True))
+    u *= 0.1 * 0.6 / np.linalg.norm(u, axis=1).max()  # largest move: 10 % of the size
+    rot = Rotation.from_rotvec(np.deg2rad(angle) * np.array([0.3, -0.5, 0.8]) / np.sqrt(0.98))
+    truth = rot.apply(src + u) + [0.2, -0.1, 0.3]
+    tgt = truth + noise * 0.6 * rng.normal(size=truth.shape)  # size (RMS radius) ~ 0.6
+    keep = rng.permutation(m)[: int(0.8 * m)]
+    return src, tgt[keep], truth
+
+
+def pair_error(tgt, truth, pairs):
+    h = cKDTree(tgt).query(tgt, k=2)[0][:, 1].mean()
+    return np.linalg.norm(tgt[pairs[:, 1]] - truth[pairs[:, 0]], axis=1) / h
+
+
+@pytest.mark.parametrize("m", [800, 3000])
+@pytest.mark.parametrize("angle", [30, 180])
+def test_pairs_within_a_spacing(m, angle):
+    src, tgt, truth = case(m, angle, noise=0.01)
+    pairs = mm.match(src, tgt).pairs
+    err = pair_error(tgt, truth, pairs)
+    assert len(pairs) >= 0.95 * m  # nearly every source point gets a partner
+    assert np.median(err) <= 1.0  # the goal of issue 16: within one target spacing
+    assert np.percentile(err, 90) <= 3.0
+
+
+def test_morph_with_own_pairs_reaches_target():
+    src, tgt, _ = case(800, 90, noise=0.005)
+    matching = mm.match(src, tgt)
+    result = mm.morph(src, tgt, matching=matching, model_nodes=800)
+    end, size = result.shapes[-1], mm.Shape(tgt).size
+    # the end shape within 1 % of the size both ways (mean nearest distance)
+    assert cKDTree(tgt).query(end)[0].mean() <= 0.01 * size
+    assert cKDTree(end).query(tgt)[0].mean() <= 0.01 * size
