@@ -65,6 +65,7 @@ _POSE_BATCH = 4  # rotations searched at once by the branch and bound of the pos
 _POSE_ROUNDS = 2
 # rotation="auto": poses within this angle of the identity keep the common frame ...
 _COMMON_ANGLE = 20.0  # degrees
+_SMALL_TURNS = (-15.0, -10.0, -5.0, 5.0, 10.0, 15.0)  # degrees, 2D common-frame poses
 # ... and win unless the best pose's search total is below theirs by more than this factor.
 # Measured (total of the best common-frame pose / best total): the 16 shared heart pairs
 # (ED -> ES, one image frame) 1.00-1.51, seven of them above 1.0 (their best pose turned
@@ -472,21 +473,25 @@ def _pose_candidates(d: int, x: np.ndarray, y: np.ndarray, rotation: str
     if rotation == "none":
         return eye, np.ones(1, bool)
     rots = _rotations(d, x, y)
-    if rotation == "auto":
+    if rotation == "auto" and d == 2:  # the identity first, then small turns about it
+        c, s = np.cos(np.radians(_SMALL_TURNS)), np.sin(np.radians(_SMALL_TURNS))
+        small = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+        rots = np.concatenate([eye, small, rots])
+    elif rotation == "auto":
         rots = np.concatenate([eye, rots])
     cos = (np.trace(rots, axis1=1, axis2=2) - (d - 2)) / 2  # cos of the rotation angle
     return rots, cos >= np.cos(np.radians(_COMMON_ANGLE)) - 1e-12
 
 
 def _pose_search(C: np.ndarray, candidates: np.ndarray, closed: bool, skip: float,
-                 repeat: float) -> tuple[float, np.ndarray, bool]:
+                 repeat: float) -> tuple[float, np.ndarray, bool, int]:
     """The cheapest pose of an ordered contour among ``candidates`` (indices into the
     rotations of ``C`` (r, m, n)), each with both directions of the target.
 
     Branch and bound: an order-preserving total is at least the sum of each row's cheapest
     choice, so rotations are searched best bound first and the search stops once no bound
     left can beat the best total found. Returns the total, the cost matrix of the best
-    pose (target reversed when it won reversed) and whether it is reversed.
+    pose (target reversed when it won reversed), whether it is reversed and its index.
     """
     bound = np.minimum(C[candidates].min(axis=2), skip).sum(axis=1)
     ranked = candidates[np.argsort(bound)]
@@ -500,7 +505,7 @@ def _pose_search(C: np.ndarray, candidates: np.ndarray, closed: bool, skip: floa
         total = _monotone_totals(_cyclic(Cb, closed), skip, repeat)
         k = int(np.argmin(total))
         if total[k] < best_total:
-            best_total, best = float(total[k]), (Cb[k], k >= len(r))
+            best_total, best = float(total[k]), (Cb[k], k >= len(r), r[k % len(r)])
     return best_total, *best
 
 
@@ -585,7 +590,9 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
     ci, cj = spread_indices(src, coarse), spread_indices(tgt, coarse)
     hc2 = h2 * (n / len(cj)) ** 2
     rots, near = _pose_candidates(d, x, y, rotation)
-    rotate, common = rotation != "none", rotation == "none"
+    # common: the common frame won the pose search, but the identity (candidate 0) was not
+    # its cheapest pose: both the turned and the unturned alternation are tried
+    rotate, common = rotation != "none", False
     z = np.einsum("rab,ib->ria", rots, x[ci])
     yc = y[cj]
     D = (np.sum(z**2, -1)[:, :, None] + np.sum(yc**2, -1)[None, None, :]
@@ -593,13 +600,13 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
     C = D + F[np.ix_(ci, cj)]
     if ordered:
         repeat = opt["repeat"] if len(ci) > len(cj) else np.inf
-        total, Cb, reverse = _pose_search(C, np.arange(len(rots)), closed, opt["skip"], repeat)
-
+        total, Cb, reverse, r = _pose_search(C, np.arange(len(rots)), closed, opt["skip"],
+                                             repeat)
         if rotation == "auto":  # the common frame unless another pose is clearly better
-            total_near, Cn, rev_near = _pose_search(C, np.flatnonzero(near), closed,
-                                                    opt["skip"], repeat)
+            total_near, Cn, rev_near, _ = _pose_search(C, np.flatnonzero(near), closed,
+                                                       opt["skip"], repeat)
             if total_near <= _COMMON_MARGIN * total:
-                Cb, reverse, common, rotate = Cn, rev_near, True, False
+                Cb, reverse, common, rotate = Cn, rev_near, r != 0, False
         jj, _ = _ordered_pairs(Cb, closed, opt["skip"], repeat)
         keep = jj >= 0
         if reverse:
@@ -634,7 +641,7 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
         if rotation == "auto":  # the common frame unless another pose is clearly better
             near_best = min(np.flatnonzero(near), key=lambda r: tried[r][0])
             if tried[near_best][0] <= _COMMON_MARGIN * tried[best][0]:
-                best, common, rotate = near_best, True, False
+                common, rotate, best = best != 0, False, near_best
         sim = turned = tried[best][1]
 
     # one target per source node, unless the source is denser than the target
@@ -650,8 +657,8 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: floa
                repeat=repeat if sub_denser else np.inf, many=sub_denser)
     z = _alternate(sim, rotate, **fit)
     if rotation == "auto" and common:
-        # the common frame without a turn, unless turning fits far better (a shape turned
-        # by less than _COMMON_ANGLE is caught by the pose search as "common")
+        # the common frame won, but a turned pose had cost less: kept without a turn
+        # unless turning fits far better in the end (a shape turned by 5-45 degrees)
         free = _alternate(turned, True, **fit)
         totals = [_objective(zz, np.arange(src.m), fit, repeat, denser) for zz in (z, free)]
         if totals[1] < _TURN_GAIN * totals[0]:

@@ -389,8 +389,7 @@ def plot_energy(morph, *, ax=None):
     Parameters
     ----------
     morph : Morph
-        A morph result: uses ``energy``, ``distance`` (else ``mean_distance``) and
-        ``stop_reason``.
+        A morph result: uses ``energy``, ``mean_distance`` and ``stop_reason``.
     ax : matplotlib Axes, optional
         Where to draw the energy; the distance goes on ``ax.twinx()``.
 
@@ -400,8 +399,7 @@ def plot_energy(morph, *, ax=None):
         The energy axes; the distance axes is its twin (the figure's last Axes).
     """
     energy = np.asarray(morph.energy, dtype=np.float64)
-    distance = getattr(morph, "distance", None)  # the stop test's, else matched nodes'
-    distance = np.asarray(morph.mean_distance if distance is None else distance, dtype=float)
+    distance = np.asarray(morph.mean_distance, dtype=np.float64)
     if ax is None:
         ax = _new_axes(2, figsize=(6.4, 4.0))
     from matplotlib.ticker import MaxNLocator

@@ -14,7 +14,8 @@ from scipy.spatial import cKDTree
 from .align import align
 from .shape import resample
 
-__all__ = ["correspondence_rotation", "curve_distances", "roughness", "self_crossings"]
+__all__ = ["Polyline", "correspondence_rotation", "curve_distances", "roughness",
+           "self_crossings"]
 
 # Nearest vertices whose adjacent segments are tested first in curve_distances; the rest is
 # checked exactly (see there). Measured with 4: no node of the heart pairs or of 250-node
@@ -49,44 +50,59 @@ def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray
     return np.linalg.norm(p - (a + t * ab), axis=-1)
 
 
-def _to_polyline(p: np.ndarray, poly: np.ndarray, closed: bool) -> np.ndarray:
-    """Exact distance from every row of ``p`` to the polyline through ``poly``."""
-    n = len(poly)
-    n_seg = n if closed else n - 1
-    start = poly
-    end = np.roll(poly, -1, axis=0)  # segment j runs from node j to node j+1 (mod n)
-    length = np.linalg.norm(end[:n_seg] - start[:n_seg], axis=1)
-    tree = cKDTree(poly)
-    k = min(_K_NEAREST, n)
-    r, idx = tree.query(p, k=k)
-    r, idx = r.reshape(len(p), k), idx.reshape(len(p), k)
-    # the segments on either side of each of the k nearest vertices
-    seg = np.concatenate([idx, idx - 1], axis=1)
-    if closed:
-        seg %= n
-    valid = (seg >= 0) & (seg < n_seg)
-    seg = np.where(valid, seg, 0)
-    d = _segment_distance(p[:, None, :], start[seg], end[seg])
-    best = np.where(valid, d, np.inf).min(axis=1)
-    # Exactness: the nearest point q of the polyline lies on a segment of length L <= L_max.
-    # If q is inside it, p - q is perpendicular to it, so the nearer end e has
-    # |p - e|^2 = |p - q|^2 + |q - e|^2 <= best^2 + L_max^2 / 4 (q at an end: |p - e| =
-    # |p - q| <= best). If the k-th nearest vertex is farther than that, e is among the k
-    # tested; otherwise test every segment with an end in that ball.
-    reach = np.sqrt(best**2 + 0.25 * length.max() ** 2)
-    unsure = np.flatnonzero((k < n) & (r[:, -1] <= reach))
-    if len(unsure):
-        near = tree.query_ball_point(p[unsure], reach[unsure], return_sorted=False)
-        count = np.fromiter(map(len, near), dtype=np.intp, count=len(unsure))
-        vert = np.concatenate(near).astype(np.intp)
-        seg = np.concatenate([vert, vert - 1])  # both segments at each vertex
-        row = np.concatenate([np.repeat(unsure, count)] * 2)
-        if closed:
+class Polyline:
+    """A polyline (n, d) ready for repeated distance queries (its k-d tree built once).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, d)
+    closed : bool
+        Whether the last node connects back to the first.
+    """
+
+    def __init__(self, points: np.ndarray, closed: bool):
+        self.points = points
+        n = len(points)
+        self.n_seg = n if closed else n - 1
+        self.closed = closed
+        self.end = np.roll(points, -1, axis=0)  # segment j runs from node j to node j+1
+        self.reach2 = 0.25 * float(np.max(np.sum(
+            (self.end[:self.n_seg] - points[:self.n_seg]) ** 2, axis=1)))
+        self.tree = cKDTree(points)
+
+    def distance(self, p: np.ndarray) -> np.ndarray:
+        """Exact distance from every row of ``p`` to the polyline."""
+        n, n_seg, start, end = len(self.points), self.n_seg, self.points, self.end
+        k = min(_K_NEAREST, n)
+        r, idx = self.tree.query(p, k=k)
+        r, idx = r.reshape(len(p), k), idx.reshape(len(p), k)
+        # the segments on either side of each of the k nearest vertices
+        seg = np.concatenate([idx, idx - 1], axis=1)
+        if self.closed:
             seg %= n
-        ok = (seg >= 0) & (seg < n_seg)
-        row, seg = row[ok], seg[ok]
-        np.minimum.at(best, row, _segment_distance(p[row], start[seg], end[seg]))
-    return best
+        valid = (seg >= 0) & (seg < n_seg)
+        seg = np.where(valid, seg, 0)
+        d = _segment_distance(p[:, None, :], start[seg], end[seg])
+        best = np.where(valid, d, np.inf).min(axis=1)
+        # Exactness: the nearest point q of the polyline lies on a segment of length
+        # L <= L_max. If q is inside it, p - q is perpendicular to it, so the nearer end e
+        # has |p - e|^2 = |p - q|^2 + |q - e|^2 <= best^2 + L_max^2 / 4 (q at an end:
+        # |p - e| = |p - q| <= best). If the k-th nearest vertex is farther than that, e
+        # is among the k tested; otherwise test every segment with an end in that ball.
+        reach = np.sqrt(best**2 + self.reach2)
+        unsure = np.flatnonzero((k < n) & (r[:, -1] <= reach))
+        if len(unsure):
+            near = self.tree.query_ball_point(p[unsure], reach[unsure], return_sorted=False)
+            count = np.fromiter(map(len, near), dtype=np.intp, count=len(unsure))
+            vert = np.concatenate(near).astype(np.intp)
+            seg = np.concatenate([vert, vert - 1])  # both segments at each vertex
+            row = np.concatenate([np.repeat(unsure, count)] * 2)
+            if self.closed:
+                seg %= n
+            ok = (seg >= 0) & (seg < n_seg)
+            row, seg = row[ok], seg[ok]
+            np.minimum.at(best, row, _segment_distance(p[row], start[seg], end[seg]))
+        return best
 
 
 def curve_distances(a, b, *, closed_a: bool = True, closed_b: bool = True,
@@ -128,7 +144,7 @@ def curve_distances(a, b, *, closed_a: bool = True, closed_b: bool = True,
                          f"{pb.shape[1]}")
     if not ordered:
         return cKDTree(pb).query(pa)[0], cKDTree(pa).query(pb)[0]
-    return _to_polyline(pa, pb, closed_b), _to_polyline(pb, pa, closed_a)
+    return Polyline(pb, closed_b).distance(pa), Polyline(pa, closed_a).distance(pb)
 
 
 def _candidate_pairs(lo: np.ndarray, hi: np.ndarray):
