@@ -22,12 +22,19 @@ log = logging.getLogger("modalmorph")
 # Options of morph() that the command line and a --config file may set.
 _MORPH_OPTIONS = {
     "remove_rigid": bool, "k": float, "dt": float, "alpha": float, "delta": float,
-    "damping": list, "c_x": float, "c_v": float, "sigma": float, "modes": (int, float, str),
-    "scheme": str, "tol": float, "tol_distance": float, "max_steps": int,
-    "equilibrium_tol": float, "unmatched": str, "neighbours": int,
+    "damping": (float, list), "c_x": float, "c_v": float, "sigma": float,
+    "modes": (int, float, str), "scheme": str, "tol": float, "tol_distance": float,
+    "max_steps": int, "equilibrium_tol": float, "unmatched": str, "neighbours": int,
+    "rotation": str, "free_motion": str,
 }
-_OTHER_OPTIONS = {"method": str, "nodes": int, "threshold": float, "material": str,
-                  "E": float, "nu": float, "rho": float}
+_OTHER_OPTIONS = {"method": str, "match_sigma": float, "nodes": int, "threshold": float,
+                  "material": str, "E": float, "nu": float, "rho": float}
+
+
+_ROTATION_HELP = ("auto (default): keep the common frame of the two inputs unless another "
+                  "pose fits clearly better (shapes turned by more than ~20 degrees are "
+                  "found); none: the inputs share one frame (frames of a sequence, "
+                  "ED/ES of one slice): never turn; free: any pose, by cost alone")
 
 
 class UsageError(ValueError):
@@ -82,8 +89,12 @@ def _parser() -> argparse.ArgumentParser:
                        help="auto (default): the most accurate, order-preserving for "
                             "contours; local: the paper's mutual best; global: an "
                             "assignment over all nodes with implausible pairs rejected")
+    match.add_argument("--rotation", choices=("auto", "free", "none"), default=None,
+                       help=_ROTATION_HELP)
     match.add_argument("--sigma", type=float, default=None,
-                       help="Gaussian width in units of the mean node spacing")
+                       help="Gaussian width of the matching models in units of the mean "
+                            "node spacing (default: 2, or less where that would make the "
+                            "Gram matrix ill-conditioned)")
     match.add_argument("--out", type=Path, default=None,
                        help="CSV file for the pairs (source,target,cost); default: stdout")
     match.add_argument("--plot", type=Path, default=None,
@@ -157,6 +168,11 @@ def _add_morph_options(parser):
                             "options given on the command line win")
     parser.add_argument("--method", choices=("auto", "local", "global"), default=None,
                        help="matching method (see 'modalmorph match --help')")
+    parser.add_argument("--rotation", choices=("auto", "free", "none"), default=None,
+                       help=_ROTATION_HELP)
+    parser.add_argument("--match-sigma", dest="match_sigma", type=float, default=None,
+                       help="Gaussian width of the matching models (see 'modalmorph match "
+                            "--help')")
     g = parser.add_argument_group("physics")
     g.add_argument("--material", default=None,
                    help="preset filling the objects: polyethylene (default, the paper's), "
@@ -165,15 +181,22 @@ def _add_morph_options(parser):
     g.add_argument("--nu", type=float, default=None, help="Poisson's ratio (custom material)")
     g.add_argument("--rho", type=float, default=None, help="density (custom material)")
     g.add_argument("--sigma", type=float, default=None,
-                   help="how far nodes interact: Gaussian width in units of the mean "
-                        "spacing between nodes (default 1; larger is smoother but "
-                        "ill-conditioned beyond ~2.5)")
+                   help="how far nodes interact in the physical model: Gaussian width in "
+                        "units of the mean spacing between nodes (default: 1, or less "
+                        "where that would make the Gram matrix ill-conditioned)")
     g.add_argument("--modes", default=None,
                    help="modes used: 'all' (default), a count (e.g. 40) or a fraction "
                         "(e.g. 2/3 or 0.66); fewer modes are cheaper and less exact")
-    g.add_argument("--damping", type=float, nargs=2, metavar=("XI1", "XI2"), default=None,
-                   help="damping ratios at the lowest and highest frequency (default 2 2, "
-                        "twice critical: no overshoot; the paper used 0.005 0.03)")
+    g.add_argument("--damping", type=float, nargs="+", metavar="XI", default=None,
+                   help="one ratio (default 1): stiffness-proportional damping, every mode "
+                        "creeps to the target at nearly one rate (no ripples or folds); or "
+                        "two: the ratios at the lowest and highest frequency (the paper "
+                        "used 0.005 0.03, which oscillates)")
+    g.add_argument("--free-motion", dest="free_motion", choices=("similarity", "none"),
+                   default=None,
+                   help="similarity (default): changes of position, orientation and size "
+                        "cost no strain energy, so any size ratio is reached; none: the "
+                        "paper's U^T K U for every motion")
     d = parser.add_argument_group("loads and time integration")
     d.add_argument("--k", type=float, default=None,
                    help="spring stiffness pulling nodes to their targets, in units of one "
@@ -250,8 +273,8 @@ def _run_match(args) -> int:
 
     options = {"nodes": args.nodes, "threshold": args.threshold}
     source, target = _read_pair(args, options)
-    kw = {key: val for key, val in (("method", args.method), ("sigma", args.sigma))
-          if val is not None}
+    kw = {key: val for key, val in (("method", args.method), ("sigma", args.sigma),
+                                    ("rotation", args.rotation)) if val is not None}
     result = match(source, target, **kw)
     table = np.column_stack([result.pairs, result.cost])
     header = "source,target,cost"
@@ -300,7 +323,7 @@ def _run_track(args) -> int:
             options[key] = value
     frames = read_frames(args.inputs, threshold=options.get("threshold"),
                          nodes=options.get("nodes"))
-    match_kw = {key: options[key] for key in ("method", "sigma") if key in options}
+    match_kw = _match_kwargs(options)
     with _progress(len(frames.shapes) - 1, quiet=args.quiet, what="tracking") as progress:
         result = track(frames.shapes, names=frames.names, reference=args.reference,
                        correspondence=args.correspondence, cycle=args.cycle,
@@ -360,21 +383,30 @@ def _morph(source, target, options, *, quiet: bool):
     from .pipeline import morph
 
     kw = _morph_kwargs(options)
-    match_kw = {"method": options["method"]} if "method" in options else {}
-    if "sigma" in options:
-        match_kw["sigma"] = options["sigma"]
-    matching = match(source, target, **match_kw)
+    matching = match(source, target, **_match_kwargs(options))
     with _progress(kw.get("max_steps", 100), quiet=quiet) as progress:
         return morph(source, target, matching=matching, progress=progress, **kw)
 
 
+def _match_kwargs(options) -> dict:
+    """Keyword arguments of match() from the merged options."""
+    names = {"method": "method", "rotation": "rotation", "match_sigma": "sigma"}
+    return {arg: options[key] for key, arg in names.items() if key in options}
+
+
 def _morph_kwargs(options) -> dict:
     """Keyword arguments of morph() from the merged options (config file, command line)."""
+    import numpy as np
+
     kw = {key: options[key] for key in _MORPH_OPTIONS if key in options}
     if "modes" in kw:
         kw["modes"] = _parse_modes(kw["modes"])
     if "damping" in kw:
-        kw["damping"] = tuple(kw["damping"])
+        damping = np.atleast_1d(np.asarray(kw["damping"], dtype=float))
+        if damping.size not in (1, 2):
+            raise UsageError(f"--damping takes one or two ratios, got {damping.size}")
+        kw["damping"] = float(damping[0]) if damping.size == 1 else tuple(damping)
+    kw.pop("rotation", None)  # a matching option: match() gets it
     kw["material"] = _material(options)
     return kw
 
@@ -481,9 +513,7 @@ def _write_outputs(result, out: Path, *, figures: bool, gif: bool, mp4: bool, vt
 
 
 def _report(result, written):
-    state = "converged" if result.converged else "did NOT converge"
-    print(f"  {len(result.matching.pairs)} matches; {state} in {result.steps} steps "
-          f"({result.stop_reason})", file=sys.stderr)
+    print(f"  {len(result.matching.pairs)} matches; {result.stop_reason}", file=sys.stderr)
     for path in written:
         print(f"  wrote {path}")
 
