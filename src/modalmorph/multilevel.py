@@ -15,7 +15,8 @@ only multiplies by the full model's sparse matrices:
    ``K_g psi = w^2 M_g psi`` with a block of ``k > n`` vectors, preconditioned by exact
    solves with ``K_g`` restricted to small patches of neighbouring nodes (block Jacobi),
    until every wanted mode's relative residual
-   ``||K_g psi - w^2 M_g psi|| / (w^2 ||M_g psi||)`` is below ``tol``.
+   ``||K_g psi - w^2 M_g psi|| / (w^2 ||M_g psi||)`` is below ``tol``, for as long as
+   the largest of them keeps falling (at most ``maxiter`` iterations).
 
 Work and memory are linear in the number of pairs within the cutoff (``model.pairs``).
 The solver assembles its own matrices from them, on its own node order (the leaves of a
@@ -36,7 +37,16 @@ ValueError: the solver never returns modes it has not checked.
 
 Measured (``benchmarks/scale.py``, 2 cores, ``OPENBLAS_NUM_THREADS=1``): 100k 3D nodes
 (198 neighbours each), lowest 50 modes in 25 s and 3.0 GB peak (3 iterations), against
-62 s and 4.9 GB with the BSR ``K_g`` and one thread.
+62 s and 4.9 GB with the BSR ``K_g`` and one thread. Nodes drawn at random are harder:
+the lowest modes are localised where the nodes crowd, hundreds of frequencies lie within a
+few percent, neither the smooth coarse start nor the patch preconditioner sees them, and
+LOBPCG needs some 30 iterations (``benchmarks/multilevel.py``: 100k random points on an
+ellipsoid or a sphere, about 2 minutes on 2 loaded cores, 2.1 GB; the frequencies are
+within 8.6e-3 of the exact solver's at 2500 such nodes, median 3.9e-3). Measured at
+20 000 random nodes on the ellipsoid and not kept: 50 guard vectors instead of 12 (22
+iterations instead of 28) and 64-node patches (23) take longer in all; a shift in the
+patches, a coarse-space correction on aggregated patches and a start from the patches'
+own lowest modes saved at most 2 iterations at 3000 nodes.
 """
 
 from __future__ import annotations
@@ -61,7 +71,19 @@ COARSE_NODES = 1000
 # Relative residual below which a mode counts as converged (see solve_modes_multilevel
 # for what it means for the frequencies, measured against the exact solvers).
 MULTILEVEL_TOL = 5e-2
-MULTILEVEL_MAXITER = 20
+# LOBPCG iterations at most. Quasi-uniform nodes converge in a few (the benchmark blob:
+# 3 at 100k nodes), but on nodes drawn at random the lowest modes are localised where the
+# nodes happen to crowd (half their displacement energy on some 30 nodes, measured at
+# 3000 nodes of a random ellipsoid), hundreds of nearly equal frequencies, and the residual
+# falls by only ~0.9 per iteration: 35 iterations for 100k random points on an ellipsoid
+# (benchmarks/multilevel.py). The run stops earlier when it stalls (_STALL_WINDOW).
+MULTILEVEL_MAXITER = 100
+# A run that has not lowered its largest wanted residual to _STALL_FACTOR times its best
+# value _STALL_WINDOW iterations before stops (and raises): measured on 100k random points,
+# the slowest steady phase lowers it by 0.78 over 10 iterations, while soft locking makes
+# it oscillate by +-15% from one iteration to the next.
+_STALL_WINDOW = 10
+_STALL_FACTOR = 0.9
 # Nodes per preconditioner patch: dense (d * 32)^2 Cholesky factors, 9 * 32 doubles per
 # 3D node in all (0.23 GB at 100k nodes).
 _PATCH_NODES = 32
@@ -100,7 +122,8 @@ def solve_modes_multilevel(model, n: int, *, coarse_nodes: int = COARSE_NODES,
         Largest relative residual ``||K_g psi - w^2 M_g psi|| / (w^2 ||M_g psi||)`` of a
         returned mode.
     maxiter : int, optional
-        LOBPCG iterations at most.
+        LOBPCG iterations at most; a run stops earlier, and raises, when its largest
+        residual has not fallen by 10% over the last 10 iterations.
     threads : int, optional
         Threads for the sparse products (each takes a block of rows); the result does not
         depend on it beyond round-off.
@@ -113,7 +136,7 @@ def solve_modes_multilevel(model, n: int, *, coarse_nodes: int = COARSE_NODES,
     Raises
     ------
     ValueError
-        When a mode's residual is still above ``tol`` after ``maxiter`` iterations, or the
+        When a mode's residual is still above ``tol`` when the iterations stop, or the
         coarse model fails.
     """
     from .element import FEModel, _breakdown_message
@@ -160,9 +183,9 @@ def solve_modes_multilevel(model, n: int, *, coarse_nodes: int = COARSE_NODES,
             raise ValueError(
                 f"the multilevel solver did not converge for this {m}-node shape: mode "
                 f"{bad} has relative residual {res[bad]:.1e} > tol={tol:g} after {its} "
-                f"iterations; raise maxiter or coarse_nodes, or use solver='sparse' on fewer "
-                f"nodes. " + (_breakdown_message(model) if not np.all(np.isfinite(res))
-                              else ""))
+                f"iterations ({'stalled' if its < maxiter else 'maxiter'}); raise maxiter or "
+                f"coarse_nodes, or use solver='sparse' on fewer nodes. "
+                + (_breakdown_message(model) if not np.all(np.isfinite(res)) else ""))
         psi = psi[:, :n] / np.sqrt(rho)  # psi^T (rho M_g) psi = I
         ops.drop_stiffness()
         phi = ops.gram(psi)  # Phi = (I kron G) psi, G assembled a block of rows at a time
@@ -560,6 +583,7 @@ def _lobpcg(K, apply_m, precondition, V, n, tol, maxiter, rows, clock=None):
     X, KX, MX = V, KV, MV
     del V, KV, MV
     P = KP = MP = None
+    best = []  # the lowest largest wanted residual so far, per iteration
     for it in range(maxiter + 1):
         # relative residuals ||K x - w2 M x|| / (w2 ||M x||), without the block K X - M X w2
         res = rows.norms(KX, w2, MX) / (np.abs(w2) * rows.norms(MX))
@@ -567,7 +591,10 @@ def _lobpcg(K, apply_m, precondition, V, n, tol, maxiter, rows, clock=None):
             clock(f"LOBPCG {it}")
         logger.debug("LOBPCG %d: residuals of the wanted modes max %.1e, median %.1e",
                      it, res[:n].max(), np.median(res[:n]))
-        if np.all(res[:n] <= tol) or it == maxiter or not np.all(np.isfinite(res)):
+        best.append(min(res[:n].max(), best[-1]) if best else res[:n].max())
+        stalled = it >= _STALL_WINDOW and best[-1] > _STALL_FACTOR * best[-1 - _STALL_WINDOW]
+        if (np.all(res[:n] <= tol) or it == maxiter or stalled
+                or not np.all(np.isfinite(res))):
             return w2, X, res, it
         # soft locking: new directions only for the columns not yet converged
         W = precondition(rows.residual(KX, MX, w2, np.flatnonzero(res > tol)))

@@ -264,7 +264,8 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
     # than model_nodes; every node then moves with the element's displacement field.
     reduced = coarsen(work, model_nodes)
     model = FEModel(reduced, sigma=sigma, material=material, solver=solver)
-    n_modes = _mode_count(modes, model.dim * model.m, sparse=model.solver == "sparse")
+    n_modes = _mode_count(modes, model.dim * model.m,
+                          sparse=model.solver in ("sparse", "multilevel"))
     md = model.modes(n_modes)
     d, m = work.dim, work.m
     w2 = md.eigenvalues
