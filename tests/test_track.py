@@ -151,9 +151,9 @@ def test_cli_track(kind, tmp_path):
     assert {"track.npz", "track.json", "strain_segments.csv", "trajectories.png",
             "curves.png", "frames_energy.png"} <= files
     assert ("track.gif" in files) == (kind == "png")
-    data = np.load(out / "track.npz")
-    assert data["points"].shape == (4, 60, 2)
-    assert np.all(data["strain"][1:] < 0)  # squeezed horizontally: the outline shortens
+    with np.load(out / "track.npz") as data:
+        assert data["points"].shape == (4, 60, 2)
+        assert np.all(data["strain"][1:] < 0)  # squeezed horizontally: the outline shortens
     import json
 
     summary = json.loads((out / "track.json").read_text())
