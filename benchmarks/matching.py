@@ -33,18 +33,28 @@ from __future__ import annotations
 import argparse
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 
-from modalmorph.datasets import load_hand
+from modalmorph.datasets import load_hand, load_heart
 from modalmorph.matching import match
-from modalmorph.shape import Shape
+from modalmorph.shape import Shape, resample
 
 ROWS = 1590
 HANDS = [load_hand(i) for i in range(8)]
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+# ED hearts (the last image of a block of 20) laid out on ROWS nodes by arc length, so row r
+# is the same point of a heart and of its contracted copy; the bundled ED when the shared
+# folder is absent
+HEARTS = [resample(np.loadtxt(f, delimiter=",", skiprows=1), ROWS)
+          for f in sorted((DATA / "heart").glob("SC-*-[0-9][0-9][0-9][0-9].csv"))
+          if int(f.stem[-4:]) % 20 == 0] or [resample(load_heart("diastole"), ROWS)]
 FAMILIES = ["hands", "warp-mild", "warp-moderate", "warp-strong", "start", "resample",
-            "rotation", "scale", "noise", "drop10", "combined"]
-WARP = {"warp-mild": 0.03, "warp-moderate": 0.06, "warp-strong": 0.12, "combined": 0.06}
+            "rotation", "scale", "noise", "drop10", "combined", "common", "common-heart"]
+COMMON = ("common", "common-heart")
+WARP = {"warp-mild": 0.03, "warp-moderate": 0.06, "warp-strong": 0.12, "combined": 0.06,
+        "common": 0.03, "common-heart": 0.03}
 
 
 def _size(p):
@@ -63,22 +73,29 @@ def _warp(p, level, rng):
 
 def make_pair(family, rng):
     """(source points, target points, source rows, target rows) for one trial."""
-    a, b = rng.choice(8, 2, replace=False)
+    shapes = HEARTS if family == "common-heart" else HANDS
+    a, b = rng.choice(len(shapes), 2, replace=False)
     if family != "hands":
-        b = a  # the factor alone, on a resampled copy of the same hand
-    resample = family in ("resample", "combined")
-    m, n = rng.integers(100, 401, 2) if resample else (200, 200)
+        b = a  # the factor alone, on a resampled copy of the same shape
+    varied = family in ("resample", "combined") + COMMON
+    m, n = rng.integers(100, 401, 2) if varied else (200, 200)
     rows_s = (rng.uniform(0, ROWS / m) + np.arange(m) * ROWS / m).astype(int) % ROWS
     rows_t = (rng.uniform(0, ROWS / n) + np.arange(n) * ROWS / n).astype(int) % ROWS
-    if family in ("start", "combined"):
+    if family in ("start", "combined") + COMMON:
         rows_s = np.roll(rows_s, rng.integers(m))
         rows_t = np.roll(rows_t, rng.integers(n))
     if family in ("drop10", "combined"):
         k = int(round(0.1 * n))
         start = rng.integers(n)
         rows_t = np.delete(rows_t, (start + np.arange(k)) % n)
-    src, tgt = HANDS[a][rows_s], HANDS[b][rows_t]
+    src, tgt = shapes[a][rows_s], shapes[b][rows_t]
     size = _size(tgt)
+    if family in COMMON:  # contracted or expanded (hands also twisted) about the centroid
+        # no twist on the hearts: near-circles turned by a few degrees keep no trace of it
+        t = np.radians(rng.uniform(-5, 5)) if family == "common" else 0.0
+        R = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+        c = shapes[b].mean(0)
+        tgt = c + (tgt - c) @ R.T * rng.uniform(0.6, 1.4)
     if family in WARP:
         tgt = _warp(tgt, WARP[family], rng)
     if family in ("noise", "combined"):
