@@ -128,11 +128,14 @@ def test_similarity_free_energy_only_for_shape_change():
 
 def test_implicit_stable_where_documented():
     """alpha = delta = 0.5 satisfies 2 alpha >= delta >= 0.5: it swung 450 px at step 1
-    and was reported diverged; with the load entering over the first step it converges."""
+    and was reported diverged; with the load entering over the first step it is stable:
+    bounded, and the distance falls (slowly: such long steps creep to the target)."""
     a, b = load_heart("diastole"), load_heart("systole")
-    r = mm.morph(a, b, alpha=0.5, delta=0.5, k=1000, dt=1)
-    assert r.converged
-    assert np.abs(r.shapes - b.mean(0)).max() < 3 * np.abs(a - b.mean(0)).max()
+    for loads in ("consistent", "nodal"):
+        r = mm.morph(a, b, alpha=0.5, delta=0.5, k=1000, dt=1, loads=loads)
+        assert np.abs(r.shapes - b.mean(0)).max() < 1.5 * np.abs(a - b.mean(0)).max()
+        assert r.mean_distance[-1] < 0.05 * r.mean_distance[0]
+        assert r.mean_distance[2:].max() <= r.mean_distance[1]  # never moving away
 
 
 def test_sigma_story():

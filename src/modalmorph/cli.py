@@ -25,7 +25,7 @@ _MORPH_OPTIONS = {
     "damping": (float, list), "c_x": float, "c_v": float, "sigma": float,
     "modes": (int, float, str), "scheme": str, "tol": float, "tol_distance": float,
     "max_steps": int, "equilibrium_tol": float, "unmatched": str, "neighbours": int,
-    "rotation": str, "free_motion": str,
+    "rotation": str, "free_motion": str, "loads": str,
 }
 _OTHER_OPTIONS = {"method": str, "match_sigma": float, "nodes": int, "threshold": float,
                   "material": str, "E": float, "nu": float, "rho": float}
@@ -192,6 +192,10 @@ def _add_morph_options(parser):
                         "creeps to the target at nearly one rate (no ripples or folds); or "
                         "two: the ratios at the lowest and highest frequency (the paper "
                         "used 0.005 0.03, which oscillates)")
+    g.add_argument("--loads", choices=("consistent", "nodal"), default=None,
+                   help="consistent (default): the springs pull every bit of the object in "
+                        "proportion to its mass, so all modes move together; nodal: the "
+                        "paper's force k (X2 - X) on every node (19)")
     g.add_argument("--free-motion", dest="free_motion", choices=("similarity", "none"),
                    default=None,
                    help="similarity (default): changes of position, orientation and size "

@@ -29,6 +29,7 @@ _STALL = 5
 # Similarity fields whose modal image is below this fraction of the largest are dependent.
 _RANK_TOL = 1e-10
 FREE_MOTIONS = ("similarity", "none")
+LOADS = ("consistent", "nodal")
 
 
 class MorphDivergedError(ArithmeticError):
@@ -106,7 +107,8 @@ class Morph:
 
 
 def morph(source, target, *, matching=None, remove_rigid: bool = False,
-          rotation: str = "auto", free_motion: str = "similarity", k: float = 100.0,
+          rotation: str = "auto", free_motion: str = "similarity",
+          loads: str = "consistent", k: float = 100.0,
           dt: float = 0.1, alpha: float = 0.25, delta: float = 0.5,
           damping: float | tuple[float, float] = 1.0, c_x: float = 0.0, c_v: float = 0.0,
           material: Material = POLYETHYLENE, sigma: float | None = None,
@@ -147,6 +149,18 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
         modes are only nearly free (method.md §1). ``"none"``: the paper's ``U^T K U``
         (22) for every motion, so a size change is resisted like any strain (a heart
         morphed onto itself scaled 1000x then stops far from it).
+    loads : {"consistent", "nodal"}, optional
+        How the springs (19)-(20) load the model. ``"nodal"``: the paper's, a force
+        ``k (X_2 - X)`` on every node; with the element's consistent mass the modes then
+        feel different springs, so some race ahead of others (a heart shrunk 1000x passed
+        through shapes 12x rougher than either end, and folded). ``"consistent"``
+        (default): every bit of the object is pulled towards where the targets say, in
+        proportion to its mass: in modal coordinates ``kappa (x_T - x)``, ``x_T`` the
+        mass projection of the targets' displacement onto the modes and ``kappa`` the
+        springs' mean modal stiffness, the same for every mode. A pure change of size or
+        pose then morphs along that similarity, and no mode lags behind. A reduced model
+        (a source of more than ``model_nodes`` nodes) is loaded node by node through its
+        field either way.
     k : float, optional
         Stiffness of the springs that pull nodes to their targets (19), in units of the
         elastic stiffness of one node of the model. Larger ``k`` pulls harder: fewer steps
@@ -243,7 +257,8 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
                          f"{src.dim}D and {tgt.dim}D")
     _check_options(k=k, dt=dt, damping=damping, scheme=scheme, tol=tol,
                    tol_distance=tol_distance, max_steps=max_steps, neighbours=neighbours,
-                   model_nodes=model_nodes, unmatched=unmatched, free_motion=free_motion)
+                   model_nodes=model_nodes, unmatched=unmatched, free_motion=free_motion,
+                   loads=loads)
     check_newmark(alpha, delta)
     check_sigma(sigma)
     if matching is None:
@@ -296,11 +311,23 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
     # of the model's nodes made free (free_motion="similarity")
     K_el = (np.diag(w2) if free_motion == "none" else
             _similarity_free(md.frequencies, MPhi.T @ _similarity_fields(model.points)))
+    # the springs (19) in modal coordinates: Phi^T R = k Phi^T (T - X) ("nodal"), or
+    # kappa x_T with x_T the modes' fit of T - X and kappa their mean ("consistent")
     PtP = Phi.gram()
-    K_mod = K_el + (k_abs * PtP if scheme == "implicit" else 0.0)
+    spring = k_abs * PtP
+    if loads == "consistent" and spread is None:  # x_T = Phi^T M (T - X), M-projection
+        kappa = k_abs * np.trace(PtP) / len(w2)
+        spring = kappa * np.eye(len(w2))
+
+        def modal(u):
+            return kappa * (MPhi.T @ u)
+    else:  # nodal, and every reduced model: each node's load through the field
+        def modal(u):
+            return k_abs * Phi.tdot(u)
+    K_mod = K_el + (spring if scheme == "implicit" else 0.0)
     w_lo, w_hi = _frequency_range(K_mod, highest=np.ndim(damping) > 0)
     if np.ndim(damping) == 0:  # every mode approaches at nearly the springs' one rate
-        a_r, b_r = _uniform_damping(float(damping), k_abs * np.trace(PtP) / len(w2), w_lo)
+        a_r, b_r = _uniform_damping(float(damping), np.trace(spring) / len(w2), w_lo)
     else:  # (5) through two ratios, as the paper
         a_r, b_r = rayleigh(*damping, w_lo, w_hi)
     C_mod = a_r * np.eye(len(w2)) + b_r * K_mod  # (5) on the loaded model
@@ -361,10 +388,9 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
     step = 0
     while reason is None:
         step += 1
-        if scheme == "implicit":  # R = k (T - X1 - U_new): the U_new part is in K_mod
-            f = k_abs * Phi.tdot(flat(T - X1))
-        else:  # (19) evaluated at the previous shape
-            f = k_abs * Phi.tdot(flat(T - current))
+        # implicit: R = k (T - X1 - U_new), the U_new part is in K_mod; explicit: (19) at
+        # the previous shape
+        f = modal(flat(T - (X1 if scheme == "implicit" else current)))
         x_new, v, a = integrator.step(x, v, a, f)
         new = X1 + nodes(Phi.dot(x_new))
         moved = np.abs(new - current).max()
@@ -396,6 +422,7 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
     if not converged:
         log.info("morph stopped without reaching the tolerance: %s", stop)
     params = dict(remove_rigid=remove_rigid, rotation=rotation, free_motion=free_motion,
+                  loads=loads,
                   k=k, dt=dt, alpha=alpha, delta=delta,
                   damping=np.asarray(damping).tolist(), c_x=c_x, c_v=c_v, material=material.name,
                   E=material.E, nu=material.nu, rho=material.rho, sigma=model.sigma_rel,
@@ -548,7 +575,7 @@ def _mode_count(modes, total, *, sparse):
 
 
 def _check_options(*, k, dt, damping, scheme, tol, tol_distance, max_steps, neighbours,
-                   model_nodes, unmatched, free_motion):
+                   model_nodes, unmatched, free_motion, loads):
     if not np.isfinite(k) or k <= 0:
         raise ValueError(f"k must be a positive number, got {k}")
     if not np.isfinite(dt) or dt <= 0:
@@ -566,6 +593,8 @@ def _check_options(*, k, dt, damping, scheme, tol, tol_distance, max_steps, neig
         raise ValueError(f"max_steps must be a positive integer, got {max_steps}")
     if int(neighbours) != neighbours or neighbours < 1:
         raise ValueError(f"neighbours must be a positive integer, got {neighbours}")
+    if loads not in LOADS:
+        raise ValueError(f"loads must be one of {LOADS}, got {loads!r}")
     if free_motion not in FREE_MOTIONS:
         raise ValueError(f"free_motion must be one of {FREE_MOTIONS}, got {free_motion!r}")
     if unmatched not in UNMATCHED_RULES:
