@@ -134,7 +134,8 @@ class LoadTargets:
         exceeds ``_COVER`` times the target's nodes per source node (at least 1), target
         nodes there would be left off the shape (a serif, a fingertip the matcher left
         unpaired): ``a`` and ``c`` join the unmatched run, which then spans the stretches
-        on both sides, until every stretch is covered or two matched nodes are left.
+        on both sides, until every stretch is covered or at most two matched nodes are
+        left (at least one stays).
         """
         m, n = len(self.source), len(self.target)
         allowed = _COVER * max(n / m, 1.0)
@@ -150,7 +151,10 @@ class LoadTargets:
             gap = span / (between + 1) > allowed
             if not gap.any():
                 return
-            self.matched[a[gap]] = self.matched[c[gap]] = False
+            free = np.union1d(a[gap], c[gap])
+            if len(free) == len(midx):  # keep one: the arclength rule then goes round
+                free = free[1:]
+            self.matched[free] = False
             self.partner[~self.matched] = -1
 
     def _contour_candidates(self, un, closed, target_closed, n):
