@@ -9,6 +9,7 @@ import http.client
 import io
 import json
 import os
+import re
 import shutil
 import threading
 import time
@@ -197,10 +198,9 @@ def _ready(browser):
 
 
 def _drawn_shape(browser) -> np.ndarray:
-    """The nodes of the shape drawn now: the start of every edge of the contour."""
-    return np.array(browser.execute_script(
-        "return [...document.querySelectorAll('#view .edges line')]"
-        ".map(l => [+l.getAttribute('x1'), +l.getAttribute('y1')])"))
+    """The nodes of the shape drawn now (the path ``M x y L x y ... Z``)."""
+    d = browser.execute_script("return document.querySelector('#view .shape').getAttribute('d')")
+    return np.array([[float(v) for v in p.split()] for p in re.split("[MLZ]", d) if p])
 
 
 def _to_last_step(browser):
@@ -218,18 +218,19 @@ def _check_colouring(browser):
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import Select
 
-    def strokes():
+    def strokes():  # the colours of the paths drawn
         return set(browser.execute_script(
-            "return [...document.querySelectorAll('#view .edges line')]"
-            ".map(l => l.getAttribute('stroke'))"))
+            "return [...document.querySelectorAll('#view .edges path')].filter(p => "
+            "p.getAttribute('visibility') !== 'hidden' && p.getAttribute('d'))"
+            ".map(p => p.getAttribute('stroke'))"))
 
     assert strokes() == {"#1f5fa8"}  # plain: one colour
     Select(browser.find_element(By.ID, "color-by")).select_by_value("energy")
-    assert len(strokes()) > 10  # by local energy: a colour per edge
+    assert len(strokes()) > 2 and "#1f5fa8" not in strokes()  # by local energy: a scale
     assert "energy" in browser.find_element(By.CSS_SELECTOR, "#colorbar .title").text
     Select(browser.find_element(By.ID, "color-by")).select_by_value("load")
     assert "load" in browser.find_element(By.CSS_SELECTOR, "#colorbar .title").text
-    assert len(strokes()) > 10
+    assert len(strokes()) > 2 and "#1f5fa8" not in strokes()
 
 
 def _download_json(browser, downloads: Path, name: str) -> dict:
