@@ -319,3 +319,36 @@ def test_report_in_browser(browser, downloads, heart_result, tmp_path):
     _check_colouring(browser)
     _compare_with_library(_download_json(browser, downloads, "morph.json"), heart_result)
     assert not browser.get_log("browser")
+
+
+def test_morph_html_flag_writes_the_report(tmp_path, hearts):
+    from modalmorph.cli import main
+
+    for name, points in zip(("a.csv", "b.csv"), hearts, strict=True):
+        np.savetxt(tmp_path / name, points, delimiter=",", header="x,y", comments="")
+    out = tmp_path / "out"
+    assert main(["morph", str(tmp_path / "a.csv"), str(tmp_path / "b.csv"), "--out", str(out),
+                 "--html", "--no-figures", "--no-gif", "--max-steps", "3", "-q"]) == 0
+    text = (out / "report.html").read_text()
+    data = json.loads(re.search(r'id="mm-data" type="application/json">(.*?)</script>',
+                                text).group(1))
+    assert data["steps"] == 3 and data["title"] == "a.csv → b.csv"
+
+
+def test_track_report_plays_the_frames(browser, hearts, tmp_path):
+    from modalmorph import track
+
+    heart = hearts[0]
+    centre = heart.mean(axis=0)
+    frames = [centre + (heart - centre) * s for s in (1.0, 0.9, 0.8)]
+    result = track(frames)
+    path = write_html(result, tmp_path / "track.html")
+    browser.get(path.as_uri())
+    _wait(browser, lambda b: _ready(b) == "result", "the embedded track")
+    assert _to_last_step(browser) == 2
+    assert_allclose(_drawn_shape(browser), result.points[-1], atol=COORD_ATOL, rtol=0)
+    drawn_target = np.array(browser.execute_script(
+        "return document.querySelector('#view .target').getAttribute('points')"
+        ".split(' ').map(p => p.split(',').map(Number))"))
+    assert_allclose(drawn_target[:-1], result.frames[-1].points, atol=COORD_ATOL)  # frame 2
+    assert "frame 2 / 2" in browser.find_element("id", "step-label").text

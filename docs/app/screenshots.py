@@ -70,6 +70,7 @@ b.find_element(By.ID, "show-matches").click()
 shot("05-energy-matches")
 b.find_element(By.ID, "show-matches").click()
 Select(b.find_element(By.ID, "color-by")).select_by_value("load")
+b.find_element(By.ID, "scale-step").click()
 box = b.find_element(By.ID, "view").rect
 hover = b.execute_script("const p = V.data.shapes[V.step][40], m = document.querySelector('#view')"
                          ".getScreenCTM(); return [p[0] * m.a + m.e, p[1] * m.d + m.f]")
@@ -77,6 +78,7 @@ ActionChains(b).move_to_element_with_offset(b.find_element(By.ID, "view"),
                                             hover[0] - box["x"] - box["width"] / 2,
                                             hover[1] - box["y"] - box["height"] / 2).perform()
 shot("06-load-hover")
+b.find_element(By.ID, "scale-step").click()
 
 with tempfile.TemporaryDirectory() as tmp:  # a grey image: threshold, then the overlay
     yy, xx = np.mgrid[:240, :320]
