@@ -113,21 +113,65 @@ def test_bad_uploads_get_a_message_and_the_server_survives(server):
     assert not any(Path(server.tmp.name).iterdir())  # every upload deleted once read
 
 
-def test_upload_and_run_over_http(server):
-    csv = "x,y\n" + "\n".join(f"{np.cos(t):.6f},{np.sin(t):.6f}"
-                              for t in np.linspace(0, 2 * np.pi, 40, endpoint=False))
-    status, shape = _request(server, "POST", "/api/upload?name=circle.csv", csv.encode())
-    assert status == 200 and len(shape["points"]) == 40 and shape["closed"]
-    status, answer = _request(server, "POST", "/api/run", json.dumps(
-        {"source": shape["id"], "target": shape["id"], "options": {"k": "-1"}}).encode())
-    job = answer["job"]
-    for _ in range(200):
+def _finish(server, job):
+    for _ in range(600):
         status, state = _request(server, "GET", f"/api/job/{job}")
         if state["state"] != "running":
-            break
+            return state
         time.sleep(0.05)
+    raise AssertionError(f"the run did not end: {state}")
+
+
+def _run(server, source, target, options):
+    status, answer = _request(server, "POST", "/api/run", json.dumps(
+        {"source": source, "target": target, "options": options}).encode())
+    assert status == 200, answer
+    return answer["job"]
+
+
+def test_upload_run_stop_and_download_over_http(server):
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    ids = []
+    for name, r in (("circle.csv", 1.0), ("flower.csv", 1 + 0.2 * np.cos(3 * t))):
+        csv = "x,y\n" + "\n".join(f"{x:.6f},{y:.6f}" for x, y in np.c_[r * np.cos(t),
+                                                                       r * np.sin(t)])
+        status, shape = _request(server, "POST", f"/api/upload?name={name}", csv.encode())
+        assert status == 200 and len(shape["points"]) == 40 and shape["closed"]
+        ids.append(shape["id"])
+
+    state = _finish(server, _run(server, *ids, {"k": "-1"}))
     assert state["state"] == "error"
     assert state["error"] == "k must be a positive number, got -1" and state["field"] == "k"
+
+    # Stop: a run that would take 10^5 steps ends at the next step
+    job = _run(server, *ids, {"k": "0.01", "dt": "0.001", "max_steps": "100000",
+                              "equilibrium_tol": "0"})
+    for _ in range(600):
+        if _request(server, "GET", f"/api/job/{job}")[1]["step"] > 0:
+            break
+        time.sleep(0.05)
+    _request(server, "POST", f"/api/job/{job}/stop", b"{}")
+    state = _finish(server, job)
+    assert state["state"] == "error" and state["error"].startswith("stopped by the user")
+
+    job = _run(server, *ids, {"remove_rigid": True})
+    assert _finish(server, job)["state"] == "done"
+    conn = http.client.HTTPConnection(*server.server_address, timeout=60)
+    files = {}
+    for name in ("result.json", "shapes.npz", "final_shape.csv", "report.html",
+                 "matches.png"):
+        conn.request("GET", f"/api/job/{job}/file/{name}")
+        response = conn.getresponse()
+        files[name] = response.read()
+        assert response.status == 200, name
+        assert name in response.getheader("Content-Disposition")
+    conn.close()
+    summary = json.loads(files["result.json"])
+    shapes = np.load(io.BytesIO(files["shapes.npz"]))["shapes"]
+    assert shapes.shape == (summary["steps"] + 1, 40, 2)
+    assert files["matches.png"].startswith(b"\x89PNG")
+    assert b'id="mm-data"' in files["report.html"]
+    assert _request(server, "GET", f"/api/job/{job}/file/../../etc/passwd")[0] == 404
 
 
 def test_foreign_host_is_refused(server):

@@ -466,8 +466,10 @@ class _Handler(BaseHTTPRequestHandler):
             self._send(HTTPStatus.OK, path.read_bytes(),
                        types.get(path.suffix, "application/octet-stream"),
                        {"Content-Disposition": f'attachment; filename="{path.name}"'})
-        else:
+        elif len(rest) == 1:
             self._json(job.status())
+        else:
+            raise _HTTPError(HTTPStatus.NOT_FOUND, f"no such page: {self.path}")
 
     def _post_job(self, rest, query):
         job = self._job(rest)
