@@ -36,7 +36,7 @@ from urllib.parse import parse_qs, urlsplit
 import numpy as np
 
 from .material import MATERIALS, Material
-from .pipeline import MorphDivergedError, morph
+from .pipeline import morph
 from .report import image_data, image_size, render_page, result_payload
 
 __all__ = ["MAX_UPLOAD", "MAX_PIXELS", "make_server", "morph_options", "parse_options",
@@ -52,8 +52,9 @@ MAX_UPLOAD = 16 * 2**20
 MAX_PIXELS = 25_000_000
 # Largest JSON request body (the options form is under 2 KB).
 _MAX_JSON = 64 * 2**10
-# Shapes and jobs kept in memory; the oldest are forgotten beyond these counts.
-_KEEP = 64
+# Shapes and runs kept in memory, the oldest forgotten beyond this count (a run of 1000
+# nodes and 100 steps holds about 10 MB of viewer JSON).
+_KEEP = 16
 # Keyword arguments of morph() that are not options of the form.
 _NOT_OPTIONS = ("source", "target", "matching", "progress")
 _FILES = ("morph.json", "result.json", "shapes.npz", "final_shape.csv", "report.html",
@@ -213,9 +214,9 @@ class _Job:
             result = morph(self.source, self.target, progress=self._progress, **self.kw)
             self.payload = result_payload(result, title=self.title, images=self.images)
             self.result, self.state = result, "done"
-        except (ValueError, ArithmeticError, MorphDivergedError, _Stopped) as exc:
+        except (ValueError, ArithmeticError, _Stopped) as exc:  # MorphDivergedError too
             self.error, self.state = str(exc).splitlines()[0], "error"
-            self.field = _field_of(self.error, self.kw)
+            self.field = _field_of(self.error)
         except Exception as exc:  # reported to the page, logged in full here
             log.exception("morph failed")
             self.error, self.state = f"internal error: {type(exc).__name__}: {exc}", "error"
@@ -253,7 +254,7 @@ class _Job:
             plot.save_figures(r, out, formats=("png",), dpi=120)
 
 
-def _field_of(message: str, kw: dict) -> str | None:
+def _field_of(message: str) -> str | None:
     """The option a library message names first (its messages start with the name)."""
     names = [o["name"] for o in morph_options()]
     words = re.findall(r"\w+", message)
@@ -409,7 +410,10 @@ class _Handler(BaseHTTPRequestHandler):
             except ValueError as exc:  # the reader names the temporary file: use the user's
                 raise ValueError(str(exc).replace(str(path), name).replace(path.name, name)) \
                     from None
-            picture = image_data(path) if image is not None else None
+            try:  # the background is a nicety: a shape without it is still a shape
+                picture = image_data(path) if image is not None else None
+            except (OSError, ValueError):
+                picture = None
         finally:
             path.unlink(missing_ok=True)
         self._json(self._store(shape, name, picture))
@@ -431,7 +435,7 @@ class _Handler(BaseHTTPRequestHandler):
             kw = parse_options(body.get("options") or {})
         except ValueError as exc:
             raise _HTTPError(HTTPStatus.BAD_REQUEST, str(exc),
-                             _field_of(str(exc), {})) from None
+                             _field_of(str(exc))) from None
         src, tgt = shapes
         images = {k: s["image"] for k, s in zip(("source", "target"), shapes, strict=True)
                   if s["image"]}
