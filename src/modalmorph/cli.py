@@ -1,4 +1,4 @@
-"""The ``modalmorph`` command line: ``demo``, ``match``, ``morph`` and ``track``.
+"""The ``modalmorph`` command line: ``demo``, ``match``, ``morph``, ``track`` and ``app``.
 
 Exit codes: 0 success, 2 bad input or usage (a one-line message naming the file and the
 problem), 1 a run that did not converge when ``--strict`` is given.
@@ -118,6 +118,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="also write a VTK time series (.vtu + .pvd) for ParaView")
     o.add_argument("--strict", action="store_true",
                    help="exit with code 1 when the morph does not reach the tolerance")
+    o.add_argument("--html", action="store_true",
+                   help="also write report.html: the interactive viewer of the result in "
+                        "one self-contained file (no network, no server)")
     morph.set_defaults(run=_run_morph)
 
     track = sub.add_parser("track", parents=[common],
@@ -157,6 +160,15 @@ def _parser() -> argparse.ArgumentParser:
                    help="skip the PNG figures")
     o.add_argument("--no-gif", dest="gif", action="store_false", help="skip the GIF")
     track.set_defaults(run=_run_track)
+
+    app = sub.add_parser("app", parents=[common], help="the interactive web application",
+                         description="Serve the method as a local web page: pick two shapes, "
+                                     "set the options, run, and explore the result.")
+    app.add_argument("--host", default="127.0.0.1",
+                     help="address to listen on (default 127.0.0.1: this machine only)")
+    app.add_argument("--port", type=int, default=8765, help="port (default 8765; 0: any)")
+    app.add_argument("--open", action="store_true", help="open the page in a browser")
+    app.set_defaults(run=_run_app)
     return parser
 
 
@@ -311,6 +323,12 @@ def _run_morph(args) -> int:
     result = _morph(source, target, options, quiet=args.quiet)
     written = _write_outputs(result, args.out, figures=args.figures, gif=args.gif,
                              mp4=args.mp4, vtk=args.vtk)
+    if args.html:
+        from .report import input_images, write_html
+
+        written.append(write_html(result, args.out / "report.html",
+                                  title=f"{args.source.name} → {args.target.name}",
+                                  images=input_images(args.source, args.target)))
     if not args.quiet:
         _report(result, written)
     return 1 if args.strict and not result.converged else 0
@@ -355,6 +373,13 @@ def _run_track(args) -> int:
               file=sys.stderr)
         for name in names:
             print(f"  wrote {args.out / name}")
+    return 0
+
+
+def _run_app(args) -> int:
+    from .app import serve
+
+    serve(args.host, args.port, open_browser=args.open)
     return 0
 
 
