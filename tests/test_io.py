@@ -485,7 +485,8 @@ def test_bad_files(tmp_path, name, content, message):
 def test_bad_arrays(tmp_path):
     cases = {
         "one.npy": (np.array([[1.0, 2.0]]), "only 1 node"),
-        "flat.npy": (np.arange(6.0), r"expected an \(m, 2\) or \(m, 3\) array"),
+        "flat.npy": (np.arange(6.0), r"the array must have shape \(m, 2\) or \(m, 3\), got "
+                                     r"shape \(6,\)"),
         "nan.npy": (np.array([[0, 0], [1, np.inf], [0, 1.0]]), "node 1 has non-finite"),
         "text.npy": (np.array([["a", "b"]] * 3), "the array must be numeric"),
     }

@@ -16,7 +16,13 @@ extensions                             content                             needs
 =====================================  ==================================  ===============
 
 Every problem with a file is a :class:`ValueError` whose message starts with the file's
-name, so the command line can print it as it is.
+name, so the command line can print it as it is: third-party parsers' own exceptions,
+memory errors for absurd sizes and a parse that runs past :data:`READ_SECONDS` included.
+
+Output folders are written whole (:func:`atomic_output_dir`): built in a hidden sibling
+``.NAME.modalmorph-tmp-PID-XXXX`` and renamed into place, so the destination is at every
+instant the old complete folder, the new complete folder or absent; temporary folders
+left by killed runs are removed by the next run writing beside them.
 """
 
 from __future__ import annotations
@@ -25,10 +31,14 @@ import dataclasses
 import json
 import math
 import os
+import re
 import shutil
+import signal
 import tempfile
+import threading
 import warnings
 import xml.etree.ElementTree as ET
+import zipfile
 from contextlib import contextmanager, redirect_stderr, redirect_stdout
 from io import StringIO
 from pathlib import Path
@@ -56,6 +66,13 @@ _IMAGE = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp")
 _MESH = (".ply", ".obj", ".stl", ".off", ".vtk", ".vtu", ".msh", ".mesh")
 SUPPORTED_EXTENSIONS = (*_TEXT, *_ARRAY, ".json", ".svg", *_IMAGE, *_MESH)
 _WRITABLE = (".csv", ".tsv", ".txt", ".npy", ".npz", ".json")
+
+# A read that takes longer than this is stopped (a parser stuck on a malformed file): base
+# seconds plus seconds per MB. The slowest reader measured, meshio on ASCII PLY, takes
+# 0.12 s per MB (100k vertices and 200k triangles, 9.8 MB, 1.17 s on a loaded 2-core
+# machine; OBJ 0.075, Gmsh 0.061, OFF and VTK 0.02 s/MB): a margin of about 17x.
+READ_SECONDS = 10.0
+_READ_SECONDS_PER_MB = 2.0
 
 # Points per segment when an SVG segment is flattened before arc-length resampling; the
 # chord error of a quarter circle sampled this finely is below 1e-4 of its radius.
@@ -151,31 +168,91 @@ def read_shape(path, *, nodes: int | None = None, threshold: float | None = None
     if threshold is not None and ext not in _IMAGE:
         raise ValueError(f"{name}: threshold= applies to images only, not {ext} files")
 
-    if ext in _IMAGE:
-        pts = _read_image(path, name, threshold)
-        return _make_shape(name, pts, nodes=nodes or DEFAULT_NODES,
-                           closed=True if closed is None else closed)
-    if ext == ".svg":
-        pts, file_closed = _read_svg(path, name)
-        return _make_shape(name, pts, nodes=nodes or DEFAULT_NODES,
-                           closed=file_closed if closed is None else closed)
-    if ext in _MESH:
-        pts, faces = _read_mesh(path, name)
-        return _make_shape(name, pts, faces=faces, nodes=nodes, closed=closed)
-
-    if ext in _TEXT:
-        pts, faces, file_closed = _read_text(path, name), None, None
-    elif ext == ".npy":
-        pts, faces, file_closed = _read_npy(path, name), None, None
-    elif ext == ".npz":
-        pts, faces, file_closed = _read_npz(path, name)
-    else:
-        pts, faces, file_closed = _read_json(path, name)
+    pts, faces, file_closed = _read_guarded(path, name, ext, threshold)
+    if ext in _IMAGE or ext == ".svg":
+        nodes = nodes or DEFAULT_NODES
     if closed is None:
         closed = True if file_closed is None else file_closed
-    if faces is None and len(pts) > 1 and np.array_equal(pts[0], pts[-1]):
+    if ext not in _MESH and faces is None and len(pts) > 1 and np.array_equal(pts[0], pts[-1]):
         pts = pts[:-1]  # a closed contour written with its first node repeated
     return _make_shape(name, pts, faces=faces, nodes=nodes, closed=closed)
+
+
+def _read_file(path: Path, name: str, ext: str, threshold):
+    """(points, faces or None, closed or None) from the reader for ``ext``."""
+    if ext in _IMAGE:
+        return _read_image(path, name, threshold), None, None
+    if ext == ".svg":
+        pts, closed = _read_svg(path, name)
+        return pts, None, closed
+    if ext in _MESH:
+        return (*_read_mesh(path, name), None)
+    if ext in _TEXT:
+        return _read_text(path, name), None, None
+    if ext == ".npy":
+        return _read_npy(path, name), None, None
+    if ext == ".npz":
+        return _read_npz(path, name)
+    return _read_json(path, name)
+
+
+def _read_guarded(path: Path, name: str, ext: str, threshold):
+    """Run the reader with bounded time; every failure a ValueError naming the file.
+
+    Third-party parsers raise many types for a malformed file (and numpy a MemoryError for
+    an absurd size in a header); they are reported as the file's problem. A parse that runs
+    past its deadline (:data:`READ_SECONDS`, more for large files) is interrupted.
+    """
+    seconds = READ_SECONDS + _READ_SECONDS_PER_MB * path.stat().st_size / 1e6
+    try:
+        with _deadline(seconds):
+            return _read_file(path, name, ext, threshold)
+    except ImportError:
+        raise
+    except _ReadTimeout:
+        raise ValueError(f"{name}: cannot read it: the reader did not finish within "
+                         f"{seconds:.0f} s (a malformed file?)") from None
+    except ValueError as exc:
+        if str(exc).startswith(name):
+            raise
+        raise ValueError(f"{name}: {exc}") from None
+    except MemoryError as exc:
+        raise ValueError(f"{name}: cannot read it: sizes in the file need more memory than "
+                         f"there is ({exc})") from None
+    except RecursionError:
+        raise ValueError(f"{name}: cannot read it: nested too deeply") from None
+    except Exception as exc:  # noqa: BLE001 - any parser failure is the file's problem
+        raise ValueError(f"{name}: cannot read it: {type(exc).__name__}: {exc}") from None
+
+
+class _ReadTimeout(BaseException):
+    """Raised by the deadline's alarm; a BaseException so parsers' ``except Exception``
+    clauses cannot swallow it."""
+
+
+@contextmanager
+def _deadline(seconds: float):
+    """Interrupt the block after ``seconds`` with :class:`_ReadTimeout` (SIGALRM).
+
+    Only in the main thread of a POSIX process with no interval timer already running;
+    elsewhere the block runs without a deadline.
+    """
+    usable = (hasattr(signal, "setitimer") and threading.current_thread() is
+              threading.main_thread() and signal.getitimer(signal.ITIMER_REAL)[0] == 0)
+    if not usable:
+        yield
+        return
+
+    def expire(signum, frame):
+        raise _ReadTimeout
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 def _make_shape(name, pts, *, faces=None, nodes=None, closed=True) -> Shape:
@@ -187,6 +264,9 @@ def _make_shape(name, pts, *, faces=None, nodes=None, closed=True) -> Shape:
     if len(pts) < 3:
         raise ValueError(f"{name}: only {len(pts)} node{'s' if len(pts) != 1 else ''}; a "
                          f"shape needs at least 3")
+    if faces is not None and pts.shape[1] != 3:
+        raise ValueError(f"{name}: has triangles but {pts.shape[1]}D points; triangles "
+                         f"describe 3D surfaces (give a 2D contour without faces)")
     bad = np.flatnonzero(~np.isfinite(pts).all(axis=1))
     if len(bad):
         raise ValueError(f"{name}: node {bad[0]} has non-finite coordinates "
@@ -278,7 +358,7 @@ def _is_number(text: str) -> bool:
 def _load_array(loader, path: Path, name: str, kind: str):
     try:
         return loader(path)
-    except (ValueError, OSError, EOFError) as exc:
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
         raise ValueError(f"{name}: cannot read it as a {kind} file: {exc}") from None
 
 
@@ -286,6 +366,9 @@ def _numeric(name: str, array, what: str) -> np.ndarray:
     array = np.asarray(array)
     if array.dtype.kind not in "iuf":
         raise ValueError(f"{name}: {what} must be numeric, got an array of dtype {array.dtype}")
+    if array.ndim != 2 or array.shape[1] not in (2, 3):
+        got = "a scalar" if array.ndim == 0 else f"shape {array.shape}"
+        raise ValueError(f"{name}: {what} must have shape (m, 2) or (m, 3), got {got}")
     return array
 
 
@@ -307,14 +390,22 @@ def _read_npz(path: Path, name: str):
     else:
         raise ValueError(f"{name}: no array named 'points' among {sorted(arrays)}")
     faces = arrays.get("faces") if "points" in arrays else None
-    closed = bool(arrays["closed"]) if "points" in arrays and "closed" in arrays else None
+    closed = arrays.get("closed") if "points" in arrays else None
+    if closed is not None:
+        if closed.shape != () or closed.dtype.kind not in "biu":
+            raise ValueError(f"{name}: 'closed' must be one boolean, got {closed.dtype} "
+                             f"{closed.shape}")
+        closed = bool(closed)
     if faces is not None:
         faces = _faces(name, faces)
     return _numeric(name, points, "'points'"), faces, closed
 
 
 def _faces(name: str, faces) -> np.ndarray:
-    faces = np.asarray(faces)
+    try:
+        faces = np.asarray(faces)
+    except (ValueError, OverflowError):  # ragged lists, integers beyond int64
+        faces = np.asarray(faces, dtype=object)
     if faces.size == 0:
         return None
     if faces.ndim != 2 or faces.shape[1] != 3 or faces.dtype.kind not in "iu":
@@ -329,8 +420,10 @@ def _read_json(path: Path, name: str):
     except UnicodeDecodeError as exc:
         raise ValueError(f"{name}: not a text file (cannot decode it as UTF-8: "
                          f"{exc.reason} at byte {exc.start})") from None
-    except json.JSONDecodeError as exc:
+    except ValueError as exc:  # JSONDecodeError, or an integer of more than 4300 digits
         raise ValueError(f"{name}: not valid JSON: {exc}") from None
+    except RecursionError:
+        raise ValueError(f"{name}: not readable JSON: nested too deeply") from None
     closed = faces = None
     if isinstance(data, dict):
         if "points" not in data:
@@ -354,7 +447,10 @@ def _read_json(path: Path, name: str):
     for k, row in enumerate(data):
         for value in row:
             if isinstance(value, bool) or not isinstance(value, int | float):
-                raise ValueError(f"{name}: node {k}: {value!r} is not a number")
+                raise ValueError(f"{name}: node {k}: {str(value)[:40]!r} is not a number")
+            if isinstance(value, int) and not -1e308 < value < 1e308:
+                raise ValueError(f"{name}: node {k}: an integer of {len(str(value))} digits "
+                                 f"is too large for a coordinate")
     return np.array(data, dtype=np.float64), faces, closed
 
 
@@ -375,6 +471,8 @@ def _read_svg(path: Path, name: str):
         svg = se.SVG.parse(os.fspath(path))
     except (ET.ParseError, ValueError) as exc:
         raise ValueError(f"{name}: not a valid SVG (XML) file: {exc}") from None
+    if not isinstance(svg, se.SVG):
+        raise ValueError(f"{name}: not an SVG file (its root element is not <svg>)")
     kinds = tuple(getattr(se, tag.capitalize()) for tag in _SVG_TAGS)
     element = next((e for e in svg.elements() if isinstance(e, kinds)), None)  # not <defs>
     if element is None:
@@ -444,6 +542,9 @@ def _read_image(path: Path, name: str, threshold: float | None) -> np.ndarray:
             Image.DecompressionBombError, ValueError) as exc:
         raise ValueError(f"{name}: cannot read the image: {exc}") from None
 
+    if grey.dtype.kind == "f" and not np.isfinite(grey).all():
+        raise ValueError(f"{name}: the image has {np.count_nonzero(~np.isfinite(grey))} "
+                         f"non-finite (NaN or inf) pixels")
     levels = np.unique(grey)
     if threshold is None:
         if len(levels) > 2:
@@ -468,6 +569,8 @@ def _read_image(path: Path, name: str, threshold: float | None) -> np.ndarray:
 
     padded = np.pad(mask, 1).astype(np.float64)  # closes contours at the image's edge
     contours = find_contours(padded, 0.5)
+    if not contours:
+        raise ValueError(f"{name}: no object outline in the image")
     areas = [_signed_area(c) for c in contours]
     best = contours[int(np.argmax(np.abs(areas)))]
     pts = best[:-1, ::-1] - 1.0  # (row, col) -> (x, y); drop the closing repeat
@@ -510,6 +613,7 @@ def _read_mesh(path: Path, name: str):
     except ImportError as exc:
         raise ImportError(f"reading meshes needs meshio ({exc}); install it with: "
                           f"pip install 'modalmorph[mesh]'") from None
+    _check_mesh_header(path.read_bytes(), name, path.suffix.lower())
     # meshio prints its diagnostics and calls sys.exit() when no reader succeeds; its STL
     # reader overflows a uint32 on purpose while guessing ASCII from binary.
     said = StringIO()
@@ -518,7 +622,9 @@ def _read_mesh(path: Path, name: str):
             warnings.simplefilter("ignore", RuntimeWarning)
             mesh = meshio.read(path)
     except (Exception, SystemExit) as exc:  # meshio raises many types for a bad file
-        detail = " ".join(said.getvalue().split()) or f"{type(exc).__name__}: {exc}"
+        printed = " ".join(said.getvalue().split())
+        detail = printed if isinstance(exc, SystemExit) else f"{type(exc).__name__}: {exc}" + (
+            f" (meshio: {printed})" if printed else "")
         raise ValueError(f"{name}: cannot read the mesh: {detail}") from None
     if said.getvalue().strip():
         warnings.warn(f"{name}: meshio: {' '.join(said.getvalue().split())}", stacklevel=3)
@@ -526,7 +632,8 @@ def _read_mesh(path: Path, name: str):
     triangles = []
     for block in mesh.cells:
         cells = np.asarray(block.data)
-        if block.type.startswith(("triangle", "quad", "polygon")) and cells.ndim == 2:
+        if block.type.startswith(("triangle", "quad", "polygon")) and cells.ndim == 2 and (
+                cells.size):
             corners = {"triangle": 3, "quad": 4}.get(block.type.rstrip("0123456789"))
             cells = cells[:, :corners] if corners else cells  # drop higher-order nodes
             for k in range(1, cells.shape[1] - 1):  # fan: (0, k, k + 1)
@@ -549,6 +656,39 @@ def _read_mesh(path: Path, name: str):
         raise ValueError(f"{name}: every triangle of the mesh is degenerate")
     used = np.unique(faces)
     return points[used], np.searchsorted(used, faces)
+
+
+def _check_mesh_header(data: bytes, name: str, ext: str) -> None:
+    """Refuse what meshio would loop on (header-only and truncated OFF, PLY and ANSYS files)
+    or allocate for: element counts the file's size cannot hold."""
+    if ext == ".off":
+        lines = [ln.split(b"#")[0].split() for ln in data.splitlines()]
+        lines = [ln for ln in lines if ln]
+        head = lines[0][0].decode("latin-1") if lines else ""
+        inline = len(lines[0]) > 1 if lines else False  # "OFF nv nf ne" on one line
+        counts = lines[0][1:] if inline else (lines[1] if len(lines) > 1 else [])
+        if not head.endswith("OFF") or len(counts) < 2 or not all(
+                c.lstrip(b"-").isdigit() for c in counts[:2]):
+            raise ValueError(f"{name}: cannot read the mesh: not an OFF file: it must start "
+                             f"with 'OFF' and the numbers of vertices and faces")
+        nv, nf = int(counts[0]), int(counts[1])
+        body = len(lines) - (1 if inline else 2)
+        if nv < 0 or nf < 0 or nv + nf > body:
+            raise ValueError(f"{name}: cannot read the mesh: the OFF header announces {nv} "
+                             f"vertices and {nf} faces but {body} line(s) follow")
+    elif ext == ".ply":
+        end = data.find(b"end_header")
+        if not data.startswith(b"ply") or end < 0:
+            raise ValueError(f"{name}: cannot read the mesh: not a PLY file: it must start "
+                             f"with 'ply' and have an 'end_header' line")
+        counts = [int(c) for c in re.findall(rb"^element\s+\S+\s+(-?\d+)", data[:end], re.M)]
+        left = len(data) - end - len(b"end_header")
+        if any(c < 0 for c in counts) or sum(counts) > left:
+            raise ValueError(f"{name}: cannot read the mesh: the PLY header announces "
+                             f"{sum(counts)} elements but only {left} bytes follow it")
+    elif ext == ".msh" and data.lstrip()[:1] == b"(" and data.rstrip()[-1:] != b")":
+        raise ValueError(f"{name}: cannot read the mesh: a truncated ANSYS mesh (it does not "
+                         f"end with ')')")
 
 
 # --------------------------------------------------------------------------------------
