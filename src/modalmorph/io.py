@@ -34,12 +34,13 @@ import os
 import re
 import shutil
 import signal
+import sys
 import tempfile
 import threading
 import warnings
 import xml.etree.ElementTree as ET
 import zipfile
-from contextlib import contextmanager, redirect_stderr, redirect_stdout
+from contextlib import contextmanager, redirect_stderr, redirect_stdout, suppress
 from io import StringIO
 from pathlib import Path
 
@@ -49,10 +50,13 @@ from .shape import Shape, resample
 
 __all__ = [
     "DEFAULT_NODES",
+    "OUTPUT_MARKER",
+    "READ_SECONDS",
     "SUPPORTED_EXTENSIONS",
     "atomic_output_dir",
     "atomic_write",
     "read_shape",
+    "remove_leftovers",
     "save_result",
     "write_points",
 ]
@@ -852,6 +856,88 @@ def _json_default(obj):
 # atomic output
 
 
+# Temporary files and folders are hidden siblings named ".NAME.modalmorph-tmp-PID-XXXX";
+# one whose process is gone was left by a killed run and is removed by the next writer.
+_TMP_TAG = ".modalmorph-tmp-"
+_LEFTOVER = re.compile(r"^\..*\.modalmorph-tmp-(\d+)-[\w-]+$")
+# A folder that is replaced as a whole must be empty or hold this file (a previous result).
+OUTPUT_MARKER = "result.json"
+# Seconds to sleep just before the final rename(s): read only here, set only by the tests
+# that kill a run at that moment.
+_PAUSE_ENV = "MODALMORPH_TEST_RENAME_PAUSE"
+
+
+def remove_leftovers(folder) -> list[Path]:
+    """Remove the temporary files and folders that killed runs left in ``folder``.
+
+    These are the hidden ``.NAME.modalmorph-tmp-PID-XXXX`` entries whose process ``PID``
+    is no longer running (POSIX only; elsewhere nothing is removed). Returns what was
+    removed.
+    """
+    if os.name != "posix":
+        return []
+    removed = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return []
+    for entry in entries:
+        found = _LEFTOVER.match(entry.name)
+        if found is None or _alive(int(found.group(1))):
+            continue
+        if entry.is_dir(follow_symlinks=False):
+            shutil.rmtree(entry.path, ignore_errors=True)
+        else:
+            with suppress(FileNotFoundError):
+                os.unlink(entry.path)
+        removed.append(Path(entry.path))
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):  # another user's process; not a PID
+        return True
+    return True
+
+
+def _temp_sibling(folder: Path, name: str) -> Path:
+    """A new hidden temporary folder in ``folder``, named after ``name`` and this process."""
+    remove_leftovers(folder)
+    return Path(tempfile.mkdtemp(prefix=f".{name}{_TMP_TAG}{os.getpid()}-", dir=folder))
+
+
+def _pause_for_tests() -> None:
+    seconds = os.environ.get(_PAUSE_ENV)
+    if seconds:
+        import time
+
+        time.sleep(float(seconds))
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two paths in one step (Linux renameat2 RENAME_EXCHANGE); False if unsupported."""
+    if not sys.platform.startswith("linux"):
+        return False
+    import ctypes
+    import errno
+
+    try:
+        renameat2 = ctypes.CDLL(None, use_errno=True).renameat2
+    except (OSError, AttributeError):  # glibc < 2.28, musl
+        return False
+    at_fdcwd, rename_exchange = -100, 2
+    if renameat2(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP):  # file system or kernel
+        return False
+    raise OSError(err, os.strerror(err), os.fspath(b))
+
+
 @contextmanager
 def atomic_write(path):
     """Write one file all or nothing: yield a temporary path beside it, then move it.
@@ -868,7 +954,7 @@ def atomic_write(path):
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp_dir = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    tmp_dir = _temp_sibling(path.parent, path.name)
     try:
         tmp = tmp_dir / path.name
         yield tmp
@@ -882,33 +968,66 @@ def atomic_write(path):
 
 @contextmanager
 def atomic_output_dir(final_dir):
-    """Fill a folder all or nothing: yield a temporary sibling folder to write into.
+    """Write a folder as a whole: yield a new temporary sibling folder to fill, then rename.
 
-    When the block ends normally, everything in the temporary folder is moved into
-    ``final_dir`` (created if needed; same-named files and folders there are replaced,
-    others kept). When it raises, the temporary folder is deleted and ``final_dir`` is
-    left as it was, so a failed run leaves no half-written output.
+    On entry the destination is checked (a folder that exists must be empty or a previous
+    output, holding :data:`OUTPUT_MARKER`) and the temporary folder is created beside it:
+    an unwritable destination fails here, before any work. Temporary folders of killed
+    runs found there are removed (:func:`remove_leftovers`).
+
+    When the block ends normally, the temporary folder becomes ``final_dir`` by one rename;
+    an existing ``final_dir`` is swapped with it in one step (``renameat2`` with
+    ``RENAME_EXCHANGE`` on Linux) or, where that is not supported, renamed aside first.
+    So at every instant ``final_dir`` is the old complete folder, the new complete folder
+    or (only in the fallback, between two renames) absent; the old one is deleted after.
+    Missing parent folders are created only then. When the block raises, the temporary
+    folder is deleted and ``final_dir`` is left as it was.
+
+    Raises
+    ------
+    ValueError
+        If ``final_dir`` exists and is not a folder, is a folder holding other files, or
+        its parent cannot be written. The message starts with ``final_dir`` as given.
 
     Examples
     --------
     >>> with atomic_output_dir("results") as tmp:  # doctest: +SKIP
     ...     save_result(morph, tmp, params=params)
     """
-    final = Path(final_dir)
-    if final.exists() and not final.is_dir():
-        raise ValueError(f"{os.fspath(final_dir)}: exists and is not a directory")
-    parent = final.absolute().parent
-    parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".tmp", dir=parent))
+    name = os.fspath(final_dir)
+    final = Path(os.path.abspath(final_dir))
+    if final.is_symlink() or (final.exists() and not final.is_dir()):
+        raise ValueError(f"{name}: exists and is not a folder")
+    if final.is_dir() and any(final.iterdir()) and not (final / OUTPUT_MARKER).is_file():
+        raise ValueError(f"{name}: a folder with other files in it (no {OUTPUT_MARKER}); the "
+                         f"output folder is replaced as a whole, so give a new or empty one")
+    anchor = final.parent  # the nearest existing ancestor holds the temporary folder
+    while not anchor.is_dir():
+        if anchor.exists() or anchor.parent == anchor:
+            raise ValueError(f"{name}: cannot create the folder: {anchor} is not a folder")
+        anchor = anchor.parent
+    try:
+        tmp = _temp_sibling(anchor, final.name or "out")
+    except OSError as exc:
+        raise ValueError(f"{name}: cannot write the output folder: cannot create a folder in "
+                         f"{anchor} ({exc.strerror})") from None
     try:
         yield tmp
-        final.mkdir(exist_ok=True)
-        for item in sorted(tmp.iterdir()):
-            dest = final / item.name
-            if dest.is_dir() and not dest.is_symlink():
-                shutil.rmtree(dest)
-            elif item.is_dir() and (dest.exists() or dest.is_symlink()):
-                dest.unlink()
-            os.replace(item, dest)
+        try:
+            final.parent.mkdir(parents=True, exist_ok=True)
+            _pause_for_tests()
+            if not final.is_dir():
+                os.rename(tmp, final)
+            elif _exchange(tmp, final):
+                pass  # tmp now holds the old folder, deleted below
+            else:
+                old = tmp.with_name(tmp.name + "-old")
+                os.rename(final, old)
+                _pause_for_tests()
+                os.rename(tmp, final)
+                tmp = old
+        except OSError as exc:
+            raise ValueError(f"{name}: cannot move the output folder into place "
+                             f"({exc.strerror})") from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
