@@ -63,3 +63,19 @@ def self_intersections(points, *, closed=True):
     i, j = np.triu_indices(n, k=2)
     keep = ~(closed & (i == 0) & (j == n - 1))  # first and last segments share a node
     return int(cross[i[keep], j[keep]].sum())
+
+
+# Hypothesis profiles: "default" keeps CI's fuzz tests to about a minute; "long" (given with
+# --hypothesis-profile=long or MODALMORPH_FUZZ=long) runs >= 10 000 API inputs.
+try:
+    import os
+
+    from hypothesis import HealthCheck, settings
+
+    settings.register_profile("default", max_examples=60, deadline=None, derandomize=True,
+                              suppress_health_check=[HealthCheck.too_slow])
+    settings.register_profile("long", max_examples=2000, deadline=None,
+                              suppress_health_check=[HealthCheck.too_slow])
+    settings.load_profile("long" if os.environ.get("MODALMORPH_FUZZ") == "long" else "default")
+except ImportError:  # hypothesis is a test extra; the fuzz tests skip without it
+    pass

@@ -429,42 +429,37 @@ def write_good_csv(path) -> Path:
     return Path(path)
 
 
-def _run_cli(path: Path, good: Path, work: Path, timeout: float, env: dict) -> str | None:
-    """Morph ``path`` into ``good`` in its own process; the problem, or None if none."""
+def _run_cli(path: Path, good: Path, work: Path, timeout: float, env: dict):
+    """Morph ``path`` into ``good`` in its own process: (exit code or "timeout", the
+    problem or None)."""
     import shutil
     import subprocess
-    import time
 
     folder = work / path.name
     folder.mkdir()
-    src, dst = folder / path.name, folder / "good.csv"
+    src = folder / path.name
     shutil.copy(path, src)
-    shutil.copy(good, dst)
-    start = time.monotonic()
+    shutil.copy(good, folder / "good.csv")
     try:
         proc = subprocess.run([sys.executable, "-m", "modalmorph.cli", "morph", src.name,
                                "good.csv", "--out", "X"], cwd=folder, env=env,
                               capture_output=True, text=True, timeout=timeout)
+        err = proc.stderr.strip().splitlines()
+        left = sorted(p.name for p in folder.iterdir())
     except subprocess.TimeoutExpired:
-        return f"timeout after {timeout:.0f} s"
-    seconds = time.monotonic() - start
-    err = proc.stderr.strip().splitlines()
-    left = sorted(p.name for p in folder.iterdir()) if folder.exists() else []
-    expected = sorted([src.name, "good.csv"] + (["X"] if proc.returncode == 0 else []))
-    try:
-        if proc.returncode not in (0, 2):
-            return f"exit {proc.returncode}: {err[-1] if err else ''}"
-        if any("Traceback" in line for line in err):
-            return f"traceback: {err[-1]}"
-        if proc.returncode == 2 and len(err) != 1:
-            return f"{len(err)} lines on stderr: {' | '.join(err)[:300]}"
-        if left != expected:
-            return f"left behind: {left}"
-        if proc.returncode == 0 and not (folder / "X" / "result.json").is_file():
-            return "exit 0 without X/result.json"
+        return "timeout", f"still running after {timeout:.0f} s"
     finally:
         shutil.rmtree(folder, ignore_errors=True)
-    return None if seconds < timeout else f"took {seconds:.0f} s"
+    expected = sorted([src.name, "good.csv"] + (["X"] if proc.returncode == 0 else []))
+    if proc.returncode not in (0, 2):
+        return proc.returncode, f"exit {proc.returncode}: {err[-1] if err else ''}"
+    if any("Traceback" in line for line in err):
+        return proc.returncode, f"traceback: {err[-1]}"
+    if proc.returncode == 2 and len(err) != 1:
+        return 2, f"{len(err)} lines on stderr: {' | '.join(err)[:300]}"
+    if left != expected:
+        return proc.returncode, f"left behind: {left}"
+    return proc.returncode, None
 
 
 def main(argv=None) -> int:
@@ -476,10 +471,13 @@ def main(argv=None) -> int:
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("folder", type=Path, help="where the corpus is written")
+    parser.add_argument("--only", nargs="*", default=None, help="file names to run")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--timeout", type=float, default=30.0)
     args = parser.parse_args(argv)
     paths = write_corpus(args.folder)
+    if args.only is not None:
+        paths = [p for p in paths if p.name in args.only]
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", MPLBACKEND="Agg",
                PYTHONPATH=os.pathsep.join([str(Path(__file__).parents[1] / "src"),
                                            os.environ.get("PYTHONPATH", "")]))
@@ -491,11 +489,12 @@ def main(argv=None) -> int:
             problems = list(pool.map(
                 lambda p: _run_cli(p, good, work, args.timeout, env), paths))
     by_ext = collections.Counter(p.suffix for p in paths)
-    bad = [(p.name, why) for p, why in zip(paths, problems, strict=True) if why]
+    codes = collections.Counter(str(code) for code, _ in problems)
+    bad = [(p.name, why) for p, (_, why) in zip(paths, problems, strict=True) if why]
     for name, why in bad:
         print(f"FAIL {name}: {why}")
-    print(f"{len(paths)} files ({', '.join(f'{e} {n}' for e, n in sorted(by_ext.items()))}); "
-          f"{len(bad)} failures")
+    print(f"{len(paths)} files ({', '.join(f'{e} {n}' for e, n in sorted(by_ext.items()))})")
+    print(f"outcomes: {dict(sorted(codes.items()))}; {len(bad)} failures")
     return 1 if bad else 0
 
 

@@ -14,6 +14,7 @@ import signal
 import subprocess
 import sys
 import time
+import traceback
 from pathlib import Path
 
 import numpy as np
@@ -211,3 +212,185 @@ def test_unwritable_out_is_refused_before_any_work(tmp_path, capsys, monkeypatch
     assert code == 2 and len(err) == 1
     # named for --out, not the missing input: --out is checked before anything is read
     assert err[0].startswith("modalmorph: error: file/X: cannot create the folder")
+
+
+# -- hypothesis over the public API -----------------------------------------------------
+
+hypothesis = pytest.importorskip("hypothesis")
+import contextlib  # noqa: E402
+
+from hypothesis import given  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+import modalmorph as mm  # noqa: E402
+
+
+@st.composite
+def point_arrays(draw, dims=(2, 3)):
+    """Arrays meant as (m, d) points, and everything that goes wrong with them: any shape,
+    dtype, NaN/inf, duplicates, collinear points, huge and tiny coordinates."""
+    odd = draw(st.integers(0, 3)) == 0  # a quarter of the arrays have any shape and dtype
+    ndim = draw(st.sampled_from([0, 1, 2, 3])) if odd else 2
+    m = draw(st.integers(0, 24) if odd else st.integers(3, 24))
+    d = draw(st.sampled_from([0, 1, 2, 3, 4]) if odd else st.sampled_from(dims))
+    shape = {0: (), 1: (m,), 2: (m, d), 3: (m, d, 2)}[ndim]
+    seed = draw(st.integers(0, 2**32 - 1))
+    rng = np.random.default_rng(seed)
+    a = rng.standard_normal(shape)
+    kind = draw(st.sampled_from(["plain"] * 4 + ["duplicates", "collinear", "nonfinite",
+                                                 "grid"]))
+    if a.ndim == 2 and len(a) > 1:
+        if kind == "duplicates":
+            a[rng.integers(0, len(a), len(a) // 2)] = a[0]
+        elif kind == "collinear":
+            a = np.outer(rng.standard_normal(len(a)), rng.standard_normal(a.shape[1]))
+        elif kind == "nonfinite" and a.size:
+            a.flat[rng.integers(0, a.size)] = draw(st.sampled_from([np.nan, np.inf, -np.inf]))
+        elif kind == "grid":
+            a = np.round(a)
+    with np.errstate(all="ignore"):
+        a = a * 10.0 ** draw(st.sampled_from([0] * 6 + [-300, -150, -20, 20, 150, 300, 307]))
+        a = a + draw(st.sampled_from([0.0] * 6 + [1e6, 1e151, -1e308]))
+        if not odd:
+            return a
+        dtype = draw(st.sampled_from([np.float64, np.float32, np.float16, np.int64, np.int8,
+                                      np.bool_, np.complex128]))
+        return a.astype(dtype)
+
+
+# Failures found by this fuzz in modules other work is changing, each reported with a
+# minimal reproduction in test_known_failures below: (exception type, module). An input
+# that hits one is rejected here (counted by hypothesis as an event), so the fuzz goes on
+# to find others.
+_KNOWN = {("OverflowError", "element.py"), ("RuntimeWarning", "element.py"),
+          ("RuntimeWarning", "dynamics.py")}
+
+
+def _known(exc) -> bool:
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if "modalmorph" in f.filename]
+    where = Path(frames[-1].filename).name if frames else ""
+    if (type(exc).__name__, where) not in _KNOWN:
+        return False
+    hypothesis.event(f"known failure: {type(exc).__name__} in {where}")
+    return True
+
+
+def _finite(*arrays):
+    for a in arrays:
+        assert np.isfinite(np.asarray(a, dtype=float)).all(), "a silent non-finite result"
+
+
+# Option values across and beyond their ranges.
+_numbers = st.sampled_from([0.0, -1.0, 1e-300, 1e-12, 0.5, 1.0, 2.5, 10.0, 1e6, 1e300,
+                            np.inf, -np.inf, np.nan, 3, True])
+
+
+@given(point_arrays(), point_arrays(), st.sampled_from([True, False, 1, "yes"]),
+       st.sampled_from(["same", "similar", "independent"]))
+def test_align_fuzz(src, dst, scale, how):
+    if how != "independent" and np.asarray(src).ndim == 2:
+        with np.errstate(all="ignore"), pytest.warns() if np.iscomplexobj(src) else (
+                contextlib.nullcontext()):
+            dst = np.asarray(src, dtype=float) * (2.0 if how == "similar" else 1.0)
+    try:
+        sim = mm.align(src, dst, scale=scale)
+    except ValueError:
+        return
+    _finite(sim.rotation, sim.scale, sim.translation)
+    np.testing.assert_allclose(sim.rotation @ sim.rotation.T, np.eye(sim.dim),
+                               atol=1e-12)  # orthogonal to rounding
+    with contextlib.suppress(ValueError):
+        _finite(sim.apply(src), sim.inverse().apply(dst))
+
+
+@given(point_arrays(), st.sampled_from([True, False]), st.integers(-2, 40))
+def test_shape_and_resample_fuzz(points, closed, n):
+    try:
+        shape = mm.Shape(points, closed=closed)
+    except ValueError:
+        return
+    _finite(shape.points, shape.normalized, shape.size, shape.spacing)
+    with contextlib.suppress(ValueError):
+        _finite(mm.resample(shape.points, n, closed=closed))
+
+
+@given(point_arrays(), point_arrays(), st.sampled_from(["auto", "local", "global", "x"]),
+       _numbers, st.sampled_from([None, 0, 1, 3, 1000, -1, 2.5]))
+def test_match_fuzz(src, dst, method, sigma, modes):
+    try:
+        result = mm.match(src, dst, method=method, sigma=sigma, modes=modes)
+    except ValueError:
+        return
+    except Exception as exc:
+        if _known(exc):
+            hypothesis.reject()
+        raise
+    assert result.pairs.ndim == 2 and result.pairs.shape[1] == 2
+    _finite(result.cost)
+
+
+@given(point_arrays(dims=(2,)), point_arrays(dims=(2,)), st.data())
+def test_morph_fuzz(src, dst, data):
+    names = ["k", "dt", "alpha", "delta", "c_x", "c_v", "sigma", "tol", "equilibrium_tol"]
+    options = {name: data.draw(_numbers, label=name)
+               for name in data.draw(st.sets(st.sampled_from(names), max_size=3))}
+    options["max_steps"] = data.draw(st.sampled_from([1, 3, 0, -1, 2.5]), label="max_steps")
+    if data.draw(st.booleans(), label="modes"):
+        options["modes"] = data.draw(st.sampled_from([None, 1, 3, 0.5, 0, 2.0, -1, np.nan]))
+    if data.draw(st.booleans(), label="damping"):
+        options["damping"] = (data.draw(_numbers), data.draw(_numbers))
+    try:
+        result = mm.morph(src, dst, **options)
+    except (ValueError, mm.MorphDivergedError):
+        return
+    except Exception as exc:
+        if _known(exc):
+            hypothesis.reject()
+        raise
+    _finite(result.shapes, result.loads, result.energy, result.node_energy,
+            result.mean_distance)
+
+
+@given(_numbers, _numbers, _numbers, _numbers)
+def test_material_and_rayleigh_fuzz(a, b, c, d):
+    try:
+        material = mm.Material(a, b, c)
+    except (ValueError, TypeError):
+        pass
+    else:
+        _finite(material.E, material.nu, material.rho)
+    with contextlib.suppress(ValueError):
+        _finite(*mm.rayleigh(a, b, c, d))
+
+
+@given(st.sampled_from([None, 0, 2, 3, 50, -1, 2.5, True, 10**30]),
+       st.sampled_from([None, 0.5, np.nan, np.inf, "1", True]),
+       st.sampled_from([None, True, False]))
+def test_read_shape_options_fuzz(tmp_path_factory, nodes, threshold, closed):
+    path = tmp_path_factory.getbasetemp() / "fuzz_options.csv"
+    if not path.exists():
+        write_good_csv(path)
+    try:
+        shape = read_shape(path, nodes=nodes, threshold=threshold, closed=closed)
+    except ValueError:
+        return
+    _finite(shape.points)
+
+
+# Minimal reproductions of the failures listed in _KNOWN (modules under other work); strict,
+# so they report when fixed. Without -W error the second is a silent inf in Newmark's
+# coefficients.
+@pytest.mark.parametrize("option, error", [
+    ({"sigma": 1e300}, OverflowError),  # element.gram_entries: math range error
+    ({"sigma": 1e-300}, RuntimeWarning),  # element.gram_entries: divide by zero
+    ({"dt": 1e-300}, RuntimeWarning),  # dynamics.Newmark: divide by zero
+])
+@pytest.mark.xfail(strict=True, reason="reported to the lead; outside io/cli/align")
+def test_known_failures(option, error):
+    points = np.random.default_rng(0).standard_normal((8, 2))
+    try:
+        mm.morph(points, points, max_steps=1, **option)
+    except (ValueError, mm.MorphDivergedError):
+        pass
+    except error:
+        raise AssertionError(f"{error.__name__} for {option}") from None

@@ -124,6 +124,9 @@ def align(source_points, target_points, *, scale: bool = True) -> Similarity:
         than 2 points, the source points all coincide, or the similarity overflows float64
         (target and source sizes more than ~1e308 apart).
     """
+    for name, a in (("source_points", source_points), ("target_points", target_points)):
+        if np.iscomplexobj(a):
+            raise ValueError(f"{name} must be real coordinates, got complex numbers")
     left = np.asarray(source_points, dtype=np.float64)
     right = np.asarray(target_points, dtype=np.float64)
     if not isinstance(scale, bool | np.bool_):

@@ -78,11 +78,6 @@ _WRITABLE = (".csv", ".tsv", ".txt", ".npy", ".npz", ".json")
 READ_SECONDS = 10.0
 _READ_SECONDS_PER_MB = 2.0
 
-# Coordinates beyond this magnitude are refused: sums of squared distances between such
-# nodes (m of them, up to 1e6 nodes) would overflow float64 (1.8e308) in the size and the
-# Gram integrals: (2e150)^2 * 1e6 = 4e306.
-_MAX_COORDINATE = 1e150
-
 # Points per segment when an SVG segment is flattened before arc-length resampling; the
 # chord error of a quarter circle sampled this finely is below 1e-4 of its radius.
 _SVG_SAMPLES = 128
@@ -280,11 +275,6 @@ def _make_shape(name, pts, *, faces=None, nodes=None, closed=True) -> Shape:
     if len(bad):
         raise ValueError(f"{name}: node {bad[0]} has non-finite coordinates "
                          f"{pts[bad[0]].tolist()} ({len(bad)} such node(s))")
-    big = np.flatnonzero(np.abs(pts).max(axis=1) > _MAX_COORDINATE)
-    if len(big):
-        raise ValueError(f"{name}: node {big[0]} has coordinates {pts[big[0]].tolist()} beyond "
-                         f"+-{_MAX_COORDINATE:g}, too large to compute with "
-                         f"({len(big)} such node(s))")
     if nodes is not None:
         if pts.shape[1] != 2 or faces is not None:
             raise ValueError(f"{name}: nodes= resamples 2D contours; this is a {pts.shape[1]}D "
