@@ -137,10 +137,9 @@ def test_cli_on_corpus_files(corpus, tmp_path, capsys, monkeypatch, name):
 # -- killed runs ------------------------------------------------------------------------
 
 
-def _check_output(folder: Path, ks: set) -> None:
-    """The folder is one complete run's output, not a mixture of two."""
-    names = sorted(p.name for p in folder.iterdir())
-    assert names == ["final_shape.csv", "result.json", "shapes.npz"], names
+def _check_output(folder: Path, names: list, ks: set) -> None:
+    """The folder is one complete run's output (these file names), not a mixture of two."""
+    assert sorted(p.name for p in folder.iterdir()) == names
     params = json.loads((folder / "result.json").read_text())["parameters"]
     assert params["k"] in ks
     with np.load(folder / "shapes.npz") as data:
@@ -159,46 +158,56 @@ def test_killed_runs_leave_the_output_complete_or_absent(tmp_path):
     def start(k, out, **env):
         return subprocess.Popen(
             [sys.executable, "-m", "modalmorph.cli", "morph", "source.csv", "target.csv",
-             "--out", out, "--k", str(k), "--no-figures", "--no-gif", "-q"],
+             "--out", out, "--k", str(k), "--no-gif", "-q"],
             cwd=tmp_path, env=_env(**env), stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL)
 
     def temporaries():
         return [p for p in tmp_path.iterdir() if ".modalmorph-tmp-" in p.name]
 
-    def wait_for_pause(proc):
-        """Until the run is held just before its final rename (all files written)."""
+    def wait_for_pause(proc, names):
+        """Until the run has written all its files and is held before its final move."""
+        own = f".modalmorph-tmp-{proc.pid}-"
         while proc.poll() is None:
-            if any((t / "final_shape.csv").exists() for t in temporaries()):
-                time.sleep(0.3)
+            if any(sorted(p.name for p in t.iterdir()) == names for t in temporaries()
+                   if own in t.name):
                 return
             time.sleep(0.02)
 
+    began = time.monotonic()
     assert start(50, "X").wait(timeout=120) == 0
-    ks = {50}
-    # Eight moments in time after the start (reading, matching, integrating, writing) and
-    # two held just before the final rename: replacing X, and creating a new Y.
-    moments = [0.05, 0.3, 0.6, 0.9, 1.2, 1.6, 2.0, 3.0, "X", "Y"]
+    whole = time.monotonic() - began
+    ks, names = {50}, sorted(p.name for p in (tmp_path / "X").iterdir())
+    assert len(names) == 13  # result.json, shapes.npz, final_shape.csv, 5 figures x 2
+    # Seven moments spread over a whole run's time (start-up, reading, matching,
+    # integrating, writing) and
+    # three while the run is held before each step of its final move (the writer sleeps
+    # PAUSE s before it): replacing X, killed in the first pause and one step later (a
+    # writer moving files one by one is caught there), and creating a new Y.
+    pause = 1.0
+    moments = [f * whole for f in (0.15, 0.3, 0.45, 0.55, 0.65, 0.75, 0.85)] + [
+        ("X", 0.3), ("X", pause + 0.5), ("Y", 0.3)]
     for i, moment in enumerate(moments):
         k = 60 + i
         ks.add(k)
-        out = moment if isinstance(moment, str) else "X"
-        held = isinstance(moment, str)
-        proc = start(k, out, **({"MODALMORPH_TEST_RENAME_PAUSE": "60"} if held else {}))
+        held = isinstance(moment, tuple)
+        out = moment[0] if held else "X"
+        proc = start(k, out, **({"MODALMORPH_TEST_RENAME_PAUSE": str(pause)} if held else {}))
         if held:
-            wait_for_pause(proc)
+            wait_for_pause(proc, names)
+            time.sleep(moment[1])
         else:
             time.sleep(moment)
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=60)
         for folder in (tmp_path / "X", tmp_path / "Y"):
             if folder.exists():
-                _check_output(folder, ks)
+                _check_output(folder, names, ks)
     assert (tmp_path / "X").exists() and not (tmp_path / "Y").exists()
-    assert temporaries()  # at least the runs held before their rename left one
+    assert temporaries()  # at least the run held before creating Y left one
 
     assert start(99, "X").wait(timeout=120) == 0  # the next run cleans up
-    _check_output(tmp_path / "X", {99})
+    _check_output(tmp_path / "X", names, {99})
     assert not temporaries()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["X", "source.csv", "target.csv"]
 
