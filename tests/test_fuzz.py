@@ -272,7 +272,7 @@ def point_arrays(draw, dims=(2, 3)):
 # that hits one is rejected here (counted by hypothesis as an event), so the fuzz goes on
 # to find others.
 _KNOWN = {("OverflowError", "element.py"), ("RuntimeWarning", "element.py"),
-          ("RuntimeWarning", "dynamics.py")}
+          ("RuntimeWarning", "dynamics.py"), ("RuntimeWarning", "pipeline.py")}
 
 
 def _known(exc) -> bool:
@@ -393,12 +393,13 @@ def test_read_shape_options_fuzz(tmp_path_factory, nodes, threshold, closed):
     ({"sigma": 1e300}, OverflowError),  # element.gram_entries: math range error
     ({"sigma": 1e-300}, RuntimeWarning),  # element.gram_entries: divide by zero
     ({"dt": 1e-300}, RuntimeWarning),  # dynamics.Newmark: divide by zero
+    ({"c_x": 1e300}, RuntimeWarning),  # pipeline.morph: overflow in matmul
 ])
 @pytest.mark.xfail(strict=True, reason="reported to the lead; outside io/cli/align")
 def test_known_failures(option, error):
-    points = np.random.default_rng(0).standard_normal((8, 2))
+    source, target = np.random.default_rng(0).standard_normal((2, 8, 2))
     try:
-        mm.morph(points, points, max_steps=1, **option)
+        mm.morph(source, target, max_steps=1, **option)
     except (ValueError, mm.MorphDivergedError):
         pass
     except error:

@@ -69,10 +69,17 @@ class Similarity:
         return out
 
     def inverse(self) -> Similarity:
-        """The similarity that undoes this one."""
+        """The similarity that undoes this one.
+
+        Raises ValueError if its scale or translation overflow float64.
+        """
         rt = self.rotation.T
-        return Similarity(rotation=rt, scale=1.0 / self.scale,
-                          translation=-(rt @ self.translation) / self.scale)
+        with np.errstate(over="ignore", invalid="ignore"):
+            scale, translation = 1.0 / self.scale, -(rt @ self.translation) / self.scale
+        if not (np.isfinite(scale) and np.isfinite(translation).all()):
+            raise ValueError(f"the inverse of a similarity of scale {self.scale:.3g} and "
+                             f"translation {self.translation} overflows float64")
+        return Similarity(rotation=rt, scale=scale, translation=translation)
 
     @classmethod
     def identity(cls, dim: int) -> Similarity:
