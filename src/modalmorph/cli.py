@@ -58,7 +58,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"modalmorph: error: {message}", file=sys.stderr)
             return 2
     for warning in caught:
-        log.warning("modalmorph: warning: %s", " ".join(str(warning.message).split()))
+        print(f"modalmorph: warning: {' '.join(str(warning.message).split())}",
+              file=sys.stderr)
     return code
 
 
