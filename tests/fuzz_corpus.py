@@ -18,6 +18,7 @@ output folder (exit 0).
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import struct
@@ -85,7 +86,8 @@ def _mesh(ext: str, points=OCTA_POINTS, faces=OCTA_FACES, fmt=None) -> bytes:
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"m{ext}"
         kw = {"binary": False} if ext in (".ply", ".stl", ".vtk") else {}
-        meshio.write(path, meshio.Mesh(points, cells), file_format=fmt, **kw)
+        with contextlib.redirect_stdout(io.StringIO()):  # meshio's notes on the format
+            meshio.write(path, meshio.Mesh(points, cells), file_format=fmt, **kw)
         return path.read_bytes()
 
 
@@ -462,6 +464,31 @@ def _run_cli(path: Path, good: Path, work: Path, timeout: float, env: dict):
     return proc.returncode, None
 
 
+def _read_all(paths) -> str:
+    """read_shape on every file: counts of shapes, named ValueErrors and anything else."""
+    import collections
+    import time
+    import warnings
+
+    from modalmorph.io import read_shape
+
+    counts, slowest = collections.Counter(), (0.0, "")
+    for path in paths:
+        start = time.perf_counter()
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                read_shape(path)
+            counts["shape"] += 1
+        except ValueError as exc:
+            counts["named ValueError" if str(exc).startswith(f"{path}: ") else
+                   "unnamed ValueError"] += 1
+        except Exception as exc:  # noqa: BLE001 - counted, that is the point
+            counts[type(exc).__name__] += 1
+        slowest = max(slowest, (time.perf_counter() - start, path.name))
+    return (f"read_shape: {dict(counts)}; slowest {slowest[1]} {slowest[0]:.2f} s")
+
+
 def main(argv=None) -> int:
     import argparse
     import collections
@@ -472,12 +499,17 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("folder", type=Path, help="where the corpus is written")
     parser.add_argument("--only", nargs="*", default=None, help="file names to run")
+    parser.add_argument("--read-only", action="store_true",
+                        help="only read every file with read_shape, in this process")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--timeout", type=float, default=30.0)
     args = parser.parse_args(argv)
     paths = write_corpus(args.folder)
     if args.only is not None:
         paths = [p for p in paths if p.name in args.only]
+    print(_read_all(paths))
+    if args.read_only:
+        return 0
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", MPLBACKEND="Agg",
                PYTHONPATH=os.pathsep.join([str(Path(__file__).parents[1] / "src"),
                                            os.environ.get("PYTHONPATH", "")]))

@@ -175,7 +175,7 @@ def read_shape(path, *, nodes: int | None = None, threshold: float | None = None
     pts, faces, file_closed = _read_guarded(path, name, ext, threshold)
     if ext in _IMAGE or ext == ".svg":
         nodes = nodes or DEFAULT_NODES
-    if closed is None:
+    if closed is None and ext not in _MESH:  # (meshes: unordered, never closed)
         closed = True if file_closed is None else file_closed
     if ext not in _MESH and faces is None and len(pts) > 1 and np.array_equal(pts[0], pts[-1]):
         pts = pts[:-1]  # a closed contour written with its first node repeated
