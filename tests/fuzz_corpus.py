@@ -86,7 +86,8 @@ def _mesh(ext: str, points=OCTA_POINTS, faces=OCTA_FACES, fmt=None) -> bytes:
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"m{ext}"
         kw = {"binary": False} if ext in (".ply", ".stl", ".vtk") else {}
-        with contextlib.redirect_stdout(io.StringIO()):  # meshio's notes on the format
+        said = io.StringIO()  # meshio's notes on the format
+        with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
             meshio.write(path, meshio.Mesh(points, cells), file_format=fmt, **kw)
         return path.read_bytes()
 
