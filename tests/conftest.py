@@ -63,3 +63,20 @@ def self_intersections(points, *, closed=True):
     i, j = np.triu_indices(n, k=2)
     keep = ~(closed & (i == 0) & (j == n - 1))  # first and last segments share a node
     return int(cross[i[keep], j[keep]].sum())
+
+
+# Hypothesis profiles: "default" as hypothesis's own, reproducible; "long" (with
+# --hypothesis-profile=long or MODALMORPH_FUZZ=long) runs 5000 examples per test (the fuzz
+# tests of test_fuzz.py run at least 500 in any profile).
+try:
+    import os
+
+    from hypothesis import HealthCheck, settings
+
+    settings.register_profile("default", deadline=None, derandomize=True,
+                              suppress_health_check=[HealthCheck.too_slow])
+    settings.register_profile("long", max_examples=5000, deadline=None,
+                              suppress_health_check=[HealthCheck.too_slow])
+    settings.load_profile("long" if os.environ.get("MODALMORPH_FUZZ") == "long" else "default")
+except ImportError:  # hypothesis is a test extra; the fuzz tests skip without it
+    pass

@@ -217,3 +217,46 @@ def test_entry_point_runs_as_module():
     done = subprocess.run([sys.executable, "-m", "modalmorph", "--version"],
                           capture_output=True, text=True, check=False)
     assert done.returncode == 0 and "modalmorph" in done.stdout
+
+
+def _svg_two_subpaths(path):
+    path.write_text('<svg xmlns="http://www.w3.org/2000/svg"><path d="M 40 100 '
+                    'A 60 40 0 1 0 160 100 C 160 60, 130 60, 100 60 S 40 60, 40 100 Z '
+                    'M 0 0 L 10 0 L 10 10 Z"/></svg>')
+    return path
+
+
+def test_warnings_one_line_each_after_success_none_after_error(tmp_path, hand_csvs, capsys):
+    svg = _svg_two_subpaths(tmp_path / "two.svg")  # read_shape warns: uses the first subpath
+    out = tmp_path / "out"
+    assert _run("morph", svg, hand_csvs[1], "--out", out, "--nodes", "70", "-q",
+                "--no-figures", "--no-gif") == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("modalmorph: warning: ") and "two.svg" in err[0]
+    c3 = _csv(tmp_path / "c3.csv", np.random.default_rng(1).standard_normal((30, 3)))
+    assert _run("morph", svg, c3, "--out", tmp_path / "o2") == 2  # warns, then fails
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("modalmorph: error: ")
+
+
+def test_out_is_replaced_whole_and_foreign_folders_refused(tmp_path, hand_csvs, capsys,
+                                                           monkeypatch):
+    out = tmp_path / "out"
+    quick = ("-q", "--no-figures", "--no-gif")
+    assert _run("morph", *hand_csvs, "--out", out, "--vtk", *quick) == 0
+    assert (out / "vtk").is_dir()
+    assert _run("morph", *hand_csvs, "--out", out, *quick) == 0  # no file of the old run
+    assert sorted(p.name for p in out.iterdir()) == ["final_shape.csv", "result.json",
+                                                     "shapes.npz"]
+    monkeypatch.chdir(tmp_path)  # "." holds the inputs: not an output folder
+    assert _run("morph", *hand_csvs, "--out", ".", *quick) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("modalmorph: error: .: a folder with other")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "b.csv", "out"]
+
+
+def test_failed_run_into_a_new_nested_path_leaves_nothing(tmp_path, hand_csvs, capsys):
+    out = tmp_path / "new" / "nested" / "out"
+    assert _run("morph", *hand_csvs, "--out", out, "--k", "-5") == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "b.csv"]

@@ -1,7 +1,9 @@
 """Reading shapes from every supported format, writing results, atomic output."""
 
 import json
+import os
 import re
+import subprocess
 import sys
 import types
 
@@ -10,12 +12,15 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 import modalmorph
+import modalmorph.io as io_module
 from modalmorph.io import (
     DEFAULT_NODES,
+    OUTPUT_MARKER,
     SUPPORTED_EXTENSIONS,
     atomic_output_dir,
     atomic_write,
     read_shape,
+    remove_leftovers,
     save_result,
     write_points,
 )
@@ -485,7 +490,8 @@ def test_bad_files(tmp_path, name, content, message):
 def test_bad_arrays(tmp_path):
     cases = {
         "one.npy": (np.array([[1.0, 2.0]]), "only 1 node"),
-        "flat.npy": (np.arange(6.0), r"expected an \(m, 2\) or \(m, 3\) array"),
+        "flat.npy": (np.arange(6.0), r"the array must have shape \(m, 2\) or \(m, 3\), got "
+                                     r"shape \(6,\)"),
         "nan.npy": (np.array([[0, 0], [1, np.inf], [0, 1.0]]), "node 1 has non-finite"),
         "text.npy": (np.array([["a", "b"]] * 3), "the array must be numeric"),
     }
@@ -576,22 +582,76 @@ def test_save_result_rejects_unwritable_params(tmp_path, rng):
     assert not (tmp_path / "out").exists()
 
 
+def _dead_pid() -> int:
+    proc = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True)
+    return int(proc.stdout)
+
+
 def test_atomic_output_dir(tmp_path):
     final = tmp_path / "results"
     with atomic_output_dir(final) as tmp:
-        assert tmp.parent == tmp_path and tmp != final
-        (tmp / "a.txt").write_text("new")
+        assert tmp.parent == tmp_path and tmp != final and not final.exists()
+        (tmp / OUTPUT_MARKER).write_text("first")
         (tmp / "sub").mkdir()
         (tmp / "sub" / "b.txt").write_text("b")
-    assert (final / "a.txt").read_text() == "new"
+    assert (final / OUTPUT_MARKER).read_text() == "first"
     assert (final / "sub" / "b.txt").read_text() == "b"
 
-    (final / "keep.txt").write_text("kept")
-    with atomic_output_dir(final) as tmp:
-        (tmp / "a.txt").write_text("newer")  # replaces the same-named file
-    assert (final / "a.txt").read_text() == "newer"
-    assert (final / "keep.txt").read_text() == "kept"
+    with atomic_output_dir(final) as tmp:  # a previous output is replaced as a whole
+        (tmp / OUTPUT_MARKER).write_text("second")
+    assert sorted(p.name for p in final.iterdir()) == [OUTPUT_MARKER]
+    assert (final / OUTPUT_MARKER).read_text() == "second"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["results"]  # no temporary left
+
+
+def test_atomic_output_dir_without_exchange(tmp_path, monkeypatch):
+    monkeypatch.setattr(io_module, "_exchange", lambda a, b: False)  # rename aside instead
+    final = tmp_path / "results"
+    final.mkdir()
+    (final / OUTPUT_MARKER).write_text("old")
+    with atomic_output_dir(final) as tmp:
+        (tmp / OUTPUT_MARKER).write_text("new")
+    assert (final / OUTPUT_MARKER).read_text() == "new"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["results"]
+
+
+def test_atomic_output_dir_nested_and_refusals(tmp_path):
+    nested = tmp_path / "a" / "b" / "results"
+    with pytest.raises(RuntimeError), atomic_output_dir(nested) as tmp:
+        assert tmp.parent == tmp_path  # the nearest existing folder
+        raise RuntimeError("boom")
+    assert not list(tmp_path.iterdir())  # no parent folders left either
+    with atomic_output_dir(nested) as tmp:
+        (tmp / "x.txt").write_text("x")
+    assert (nested / "x.txt").read_text() == "x"
+
+    foreign = tmp_path / "home"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("mine")
+    (tmp_path / "file").write_text("")
+    for path, message in ((foreign, "a folder with other files"),
+                          (tmp_path / "file", "exists and is not a folder"),
+                          (tmp_path / "file" / "out", "cannot create the folder")):
+        with pytest.raises(ValueError, match=_err(path) + message), atomic_output_dir(path):
+            pass
+    assert (foreign / "notes.txt").read_text() == "mine"
+
+
+def test_leftovers_of_dead_runs_are_removed(tmp_path):
+    dead = tmp_path / f".results.modalmorph-tmp-{_dead_pid()}-abc123"
+    (dead / "sub").mkdir(parents=True)
+    dead_file = tmp_path / f".pairs.csv.modalmorph-tmp-{_dead_pid()}-x_y-old"
+    dead_file.write_text("")
+    alive = tmp_path / f".results.modalmorph-tmp-{os.getpid()}-abc123"
+    alive.mkdir()
+    other = tmp_path / ".results.other-tmp-1-abc"
+    other.mkdir()
+    assert sorted(remove_leftovers(tmp_path)) == sorted([dead, dead_file])
+    assert alive.exists() and other.exists() and not dead.exists()
+    dead.mkdir()
+    with atomic_output_dir(tmp_path / "results"):  # the next run cleans up
+        assert not dead.exists()
 
 
 def test_atomic_output_dir_leaves_nothing_on_error(tmp_path):
@@ -602,11 +662,11 @@ def test_atomic_output_dir_leaves_nothing_on_error(tmp_path):
     assert not list(tmp_path.iterdir())
 
     final.mkdir()
-    (final / "a.txt").write_text("old")
+    (final / OUTPUT_MARKER).write_text("old")
     with pytest.raises(RuntimeError), atomic_output_dir(final) as tmp:
-        (tmp / "a.txt").write_text("new")
+        (tmp / OUTPUT_MARKER).write_text("new")
         raise RuntimeError("boom")
-    assert (final / "a.txt").read_text() == "old"
+    assert (final / OUTPUT_MARKER).read_text() == "old"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["results"]
 
 

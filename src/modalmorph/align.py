@@ -16,6 +16,10 @@ import numpy as np
 
 __all__ = ["Similarity", "align"]
 
+# Source points whose spread is at most this fraction of their magnitude coincide (a few
+# float64 roundings: 1e-16 relative).
+_COINCIDE = 1e-14
+
 
 @dataclass(frozen=True, eq=False)
 class Similarity:
@@ -48,18 +52,34 @@ class Similarity:
         return out
 
     def apply(self, points) -> np.ndarray:
-        """Transform points of shape (m, d) (or one point (d,)); returns the same shape."""
+        """Transform points of shape (m, d) (or one point (d,)); returns the same shape.
+
+        Raises ValueError if ``points`` are not finite or their images overflow float64.
+        """
         p = np.asarray(points, dtype=np.float64)
-        if p.shape[-1] != self.dim:
+        if p.ndim not in (1, 2) or p.shape[-1] != self.dim:
             raise ValueError(f"points must have {self.dim} coordinates per row, got "
                              f"shape {p.shape}")
-        return self.scale * p @ self.rotation.T + self.translation
+        if not np.isfinite(p).all():
+            raise ValueError("points must be finite (no NaN or inf)")
+        with np.errstate(over="ignore", invalid="ignore"):
+            out = self.scale * p @ self.rotation.T + self.translation
+        if not np.isfinite(out).all():
+            raise ValueError("the transformed points overflow float64")
+        return out
 
     def inverse(self) -> Similarity:
-        """The similarity that undoes this one."""
+        """The similarity that undoes this one.
+
+        Raises ValueError if its scale or translation overflow float64.
+        """
         rt = self.rotation.T
-        return Similarity(rotation=rt, scale=1.0 / self.scale,
-                          translation=-(rt @ self.translation) / self.scale)
+        with np.errstate(over="ignore", invalid="ignore"):
+            scale, translation = 1.0 / self.scale, -(rt @ self.translation) / self.scale
+        if not (np.isfinite(scale) and np.isfinite(translation).all()):
+            raise ValueError(f"the inverse of a similarity of scale {self.scale:.3g} and "
+                             f"translation {self.translation} overflows float64")
+        return Similarity(rotation=rt, scale=scale, translation=translation)
 
     @classmethod
     def identity(cls, dim: int) -> Similarity:
@@ -112,10 +132,16 @@ def align(source_points, target_points, *, scale: bool = True,
     ------
     ValueError
         If the arrays differ in shape, are not (k, 2) or (k, 3), are not finite, have fewer
-        than 2 points, or the source points all coincide.
+        than 2 points, the source points all coincide, or the similarity overflows float64
+        (target and source sizes more than ~1e308 apart).
     """
+    for name, a in (("source_points", source_points), ("target_points", target_points)):
+        if np.iscomplexobj(a):
+            raise ValueError(f"{name} must be real coordinates, got complex numbers")
     left = np.asarray(source_points, dtype=np.float64)
     right = np.asarray(target_points, dtype=np.float64)
+    if not isinstance(scale, bool | np.bool_):
+        raise ValueError(f"scale must be True or False, got {scale!r}")
     for name, a in (("source_points", left), ("target_points", right)):
         if a.ndim != 2 or a.shape[1] not in (2, 3):
             raise ValueError(f"{name} must have shape (k, 2) or (k, 3), got {a.shape}")
@@ -127,14 +153,37 @@ def align(source_points, target_points, *, scale: bool = True,
     k, d = left.shape
     if k < 2:
         raise ValueError(f"align needs at least 2 corresponding points, got {k}")
-    mean_l, mean_r = left.mean(axis=0), right.mean(axis=0)
-    cl, cr = left - mean_l, right - mean_r  # centred (section 5.2)
-    norm_l, norm_r = np.sum(cl**2), np.sum(cr**2)
-    if norm_l <= 1e-300:
+    # Centred (section 5.2), each set divided by its largest centred coordinate so that no
+    # square over- or underflows; the scale is put back in ``s`` below.
+    mean_l, mean_r = _mean(left), _mean(right)
+    cl, cr = left - mean_l, right - mean_r
+    if not (np.isfinite(cl).all() and np.isfinite(cr).all()):
+        raise ValueError("source_points or target_points span more than float64 can hold")
+    unit_l, unit_r = np.abs(cl).max(), np.abs(cr).max()
+    if unit_l <= _COINCIDE * np.abs(left).max():
         raise ValueError("source_points all coincide: the similarity is undetermined")
-    s = float(np.sqrt(norm_r / norm_l)) if scale else 1.0  # symmetric scale
-    if not rotate:
-        return Similarity(rotation=np.eye(d), scale=s, translation=mean_r - s * mean_l)
+    cl = cl / unit_l
+    cr = cr / unit_r if unit_r > 0 else cr
+    norm_l, norm_r = np.sum(cl**2), np.sum(cr**2)
+    R = _rotation(cl, cr) if rotate else np.eye(d)
+    with np.errstate(over="ignore", invalid="ignore"):
+        s = float(np.sqrt(norm_r / norm_l) * (unit_r / unit_l)) if scale else 1.0  # symmetric
+        t = mean_r - s * R @ mean_l
+    if not (np.isfinite(s) and s > 0 and np.isfinite(t).all()):
+        raise ValueError(f"the similarity overflows float64 (scale {s:.3g}): source_points and "
+                         f"target_points differ too much in size or position")
+    return Similarity(rotation=R, scale=s, translation=t)
+
+
+def _mean(a: np.ndarray) -> np.ndarray:
+    """Column means without overflow for coordinates near the float64 limit."""
+    big = np.abs(a).max()
+    return a.mean(axis=0) if big < 1e300 else (a / big).mean(axis=0) * big
+
+
+def _rotation(cl: np.ndarray, cr: np.ndarray) -> np.ndarray:
+    """Horn's rotation (d, d) between centred corresponding points (k, d)."""
+    k, d = cl.shape
     if d == 2:  # embed with z = 0
         cl3, cr3 = np.c_[cl, np.zeros(k)], np.c_[cr, np.zeros(k)]
     else:
@@ -147,5 +196,4 @@ def align(source_points, target_points, *, scale: bool = True,
     else:
         _, vec = np.linalg.eigh(N)
         q = vec[:, -1]  # eigenvector of the largest eigenvalue
-    R = _rotation_from_quaternion(q)[:d, :d]
-    return Similarity(rotation=R, scale=s, translation=mean_r - s * R @ mean_l)
+    return _rotation_from_quaternion(q)[:d, :d]

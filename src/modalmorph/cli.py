@@ -10,6 +10,7 @@ import argparse
 import contextlib
 import logging
 import sys
+import warnings
 from pathlib import Path
 
 from . import __version__
@@ -52,12 +53,22 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(message)s")
     from .pipeline import MorphDivergedError
 
-    try:
-        return args.run(args)
-    except (ValueError, OSError, ImportError, MorphDivergedError) as exc:
-        message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        print(f"modalmorph: error: {message}", file=sys.stderr)
-        return 2
+    # Library warnings are collected, not printed as they come: after a successful run each
+    # is one line; after an error the error's line is the only one.
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("default")
+        try:
+            code = args.run(args)
+        except Exception as exc:  # noqa: BLE001 - one line, never a traceback
+            known = isinstance(exc, ValueError | OSError | ImportError | MorphDivergedError)
+            text = " ".join(str(exc).split())
+            message = text if known and text else f"{type(exc).__name__}: {text}"
+            print(f"modalmorph: error: {message}", file=sys.stderr)
+            return 2
+    for warning in caught:
+        print(f"modalmorph: warning: {' '.join(str(warning.message).split())}",
+              file=sys.stderr)
+    return code
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -319,16 +330,21 @@ def _run_morph(args) -> int:
         value = getattr(args, key, None)
         if value is not None:
             options[key] = value
-    source, target = _read_pair(args, options)
-    result = _morph(source, target, options, quiet=args.quiet)
-    written = _write_outputs(result, args.out, figures=args.figures, gif=args.gif,
-                             mp4=args.mp4, vtk=args.vtk)
-    if args.html:
-        from .report import input_images, write_html
+    from .io import atomic_output_dir
 
-        written.append(write_html(result, args.out / "report.html",
-                                  title=f"{args.source.name} → {args.target.name}",
-                                  images=input_images(args.source, args.target)))
+    with atomic_output_dir(args.out) as folder:  # checks --out before any work
+        source, target = _read_pair(args, options)
+        result = _morph(source, target, options, quiet=args.quiet)
+        written = _write_outputs(result, folder, figures=args.figures, gif=args.gif,
+                                 mp4=args.mp4, vtk=args.vtk)
+        if args.html:
+            from .report import input_images, write_html
+
+            write_html(result, folder / "report.html",
+                       title=f"{args.source.name} → {args.target.name}",
+                       images=input_images(args.source, args.target))
+            written.append("report.html")
+    written = [args.out / name for name in written]
     if not args.quiet:
         _report(result, written)
     return 1 if args.strict and not result.converged else 0
@@ -385,6 +401,7 @@ def _run_app(args) -> int:
 
 def _run_demo(args) -> int:
     from .datasets import load_hand, load_heart
+    from .io import atomic_output_dir
     from .shape import Shape, resample
 
     cases = {
@@ -396,9 +413,11 @@ def _run_demo(args) -> int:
     for name, (source, target, what) in cases.items():
         if not args.quiet:
             print(f"{name}: {what}", file=sys.stderr)
-        result = _morph(source, target, {}, quiet=args.quiet)
-        written = _write_outputs(result, args.out / name, figures=True, gif=True, mp4=False,
-                                 vtk=False)
+        with atomic_output_dir(args.out / name) as folder:
+            result = _morph(source, target, {}, quiet=args.quiet)
+            written = _write_outputs(result, folder, figures=True, gif=True, mp4=False,
+                                     vtk=False)
+        written = [args.out / name / path for path in written]
         if not args.quiet:
             _report(result, written)
     return 0
@@ -519,26 +538,25 @@ def _progress(total: int, *, quiet: bool, what: str = "morphing"):
         yield update
 
 
-def _write_outputs(result, out: Path, *, figures: bool, gif: bool, mp4: bool, vtk: bool):
-    from .io import atomic_output_dir, save_result
+def _write_outputs(result, folder: Path, *, figures: bool, gif: bool, mp4: bool, vtk: bool):
+    """Write every output into ``folder``; returns the files' paths relative to it."""
+    from .io import save_result
 
-    with atomic_output_dir(out) as tmp:
-        save_result(result, tmp, params=result.params)
-        if figures or gif or mp4:
-            from . import plot
+    save_result(result, folder, params=result.params)
+    if figures or gif or mp4:
+        from . import plot
 
-            if figures:
-                plot.save_figures(result, tmp)
-            if gif:
-                plot.animate(result, tmp / "morph.gif")
-            if mp4:
-                plot.animate(result, tmp / "morph.mp4")
-        if vtk:
-            from .plot import write_vtk_series
+        if figures:
+            plot.save_figures(result, folder)
+        if gif:
+            plot.animate(result, folder / "morph.gif")
+        if mp4:
+            plot.animate(result, folder / "morph.mp4")
+    if vtk:
+        from .plot import write_vtk_series
 
-            write_vtk_series(result, tmp / "vtk")
-        names = sorted(p.relative_to(tmp) for p in tmp.rglob("*") if p.is_file())
-    return [out / name for name in names]
+        write_vtk_series(result, folder / "vtk")
+    return sorted(p.relative_to(folder) for p in folder.rglob("*") if p.is_file())
 
 
 def _report(result, written):

@@ -16,7 +16,13 @@ extensions                             content                             needs
 =====================================  ==================================  ===============
 
 Every problem with a file is a :class:`ValueError` whose message starts with the file's
-name, so the command line can print it as it is.
+name, so the command line can print it as it is: third-party parsers' own exceptions,
+memory errors for absurd sizes and a parse that runs past :data:`READ_SECONDS` included.
+
+Output folders are written whole (:func:`atomic_output_dir`): built in a hidden sibling
+``.NAME.modalmorph-tmp-PID-XXXX`` and renamed into place, so the destination is at every
+instant the old complete folder, the new complete folder or absent; temporary folders
+left by killed runs are removed by the next run writing beside them.
 """
 
 from __future__ import annotations
@@ -28,10 +34,14 @@ import math
 import os
 import re
 import shutil
+import signal
+import sys
 import tempfile
+import threading
 import warnings
 import xml.etree.ElementTree as ET
-from contextlib import contextmanager, redirect_stderr, redirect_stdout
+import zipfile
+from contextlib import contextmanager, redirect_stderr, redirect_stdout, suppress
 from io import StringIO
 from pathlib import Path
 
@@ -42,11 +52,14 @@ from .shape import Shape, resample
 __all__ = [
     "DEFAULT_NODES",
     "Frames",
+    "OUTPUT_MARKER",
+    "READ_SECONDS",
     "SUPPORTED_EXTENSIONS",
     "atomic_output_dir",
     "atomic_write",
     "read_frames",
     "read_shape",
+    "remove_leftovers",
     "save_result",
     "save_track",
     "write_points",
@@ -61,6 +74,13 @@ _IMAGE = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp")
 _MESH = (".ply", ".obj", ".stl", ".off", ".vtk", ".vtu", ".msh", ".mesh")
 SUPPORTED_EXTENSIONS = (*_TEXT, *_ARRAY, ".json", ".svg", *_IMAGE, *_MESH)
 _WRITABLE = (".csv", ".tsv", ".txt", ".npy", ".npz", ".json")
+
+# A read that takes longer than this is stopped (a parser stuck on a malformed file): base
+# seconds plus seconds per MB. The slowest reader measured, meshio on ASCII PLY, takes
+# 0.12 s per MB (100k vertices and 200k triangles, 9.8 MB, 1.17 s on a loaded 2-core
+# machine; OBJ 0.075, Gmsh 0.061, OFF and VTK 0.02 s/MB): a margin of about 17x.
+READ_SECONDS = 10.0
+_READ_SECONDS_PER_MB = 2.0
 
 # Points per segment when an SVG segment is flattened before arc-length resampling; the
 # chord error of a quarter circle sampled this finely is below 1e-4 of its radius.
@@ -156,31 +176,91 @@ def read_shape(path, *, nodes: int | None = None, threshold: float | None = None
     if threshold is not None and ext not in _IMAGE:
         raise ValueError(f"{name}: threshold= applies to images only, not {ext} files")
 
-    if ext in _IMAGE:
-        pts = _read_image(path, name, threshold)
-        return _make_shape(name, pts, nodes=nodes or DEFAULT_NODES,
-                           closed=True if closed is None else closed)
-    if ext == ".svg":
-        pts, file_closed = _read_svg(path, name)
-        return _make_shape(name, pts, nodes=nodes or DEFAULT_NODES,
-                           closed=file_closed if closed is None else closed)
-    if ext in _MESH:
-        pts, faces = _read_mesh(path, name)
-        return _make_shape(name, pts, faces=faces, nodes=nodes, closed=closed)
-
-    if ext in _TEXT:
-        pts, faces, file_closed = _read_text(path, name), None, None
-    elif ext == ".npy":
-        pts, faces, file_closed = _read_npy(path, name), None, None
-    elif ext == ".npz":
-        pts, faces, file_closed = _read_npz(path, name)
-    else:
-        pts, faces, file_closed = _read_json(path, name)
-    if closed is None:
+    pts, faces, file_closed = _read_guarded(path, name, ext, threshold)
+    if ext in _IMAGE or ext == ".svg":
+        nodes = nodes or DEFAULT_NODES
+    if closed is None and ext not in _MESH:  # (meshes: unordered, never closed)
         closed = True if file_closed is None else file_closed
-    if faces is None and len(pts) > 1 and np.array_equal(pts[0], pts[-1]):
+    if ext not in _MESH and faces is None and len(pts) > 1 and np.array_equal(pts[0], pts[-1]):
         pts = pts[:-1]  # a closed contour written with its first node repeated
     return _make_shape(name, pts, faces=faces, nodes=nodes, closed=closed)
+
+
+def _read_file(path: Path, name: str, ext: str, threshold):
+    """(points, faces or None, closed or None) from the reader for ``ext``."""
+    if ext in _IMAGE:
+        return _read_image(path, name, threshold), None, None
+    if ext == ".svg":
+        pts, closed = _read_svg(path, name)
+        return pts, None, closed
+    if ext in _MESH:
+        return (*_read_mesh(path, name), None)
+    if ext in _TEXT:
+        return _read_text(path, name), None, None
+    if ext == ".npy":
+        return _read_npy(path, name), None, None
+    if ext == ".npz":
+        return _read_npz(path, name)
+    return _read_json(path, name)
+
+
+def _read_guarded(path: Path, name: str, ext: str, threshold):
+    """Run the reader with bounded time; every failure a ValueError naming the file.
+
+    Third-party parsers raise many types for a malformed file (and numpy a MemoryError for
+    an absurd size in a header); they are reported as the file's problem. A parse that runs
+    past its deadline (:data:`READ_SECONDS`, more for large files) is interrupted.
+    """
+    seconds = READ_SECONDS + _READ_SECONDS_PER_MB * path.stat().st_size / 1e6
+    try:
+        with _deadline(seconds):
+            return _read_file(path, name, ext, threshold)
+    except ImportError:
+        raise
+    except _ReadTimeout:
+        raise ValueError(f"{name}: cannot read it: the reader did not finish within "
+                         f"{seconds:.0f} s (a malformed file?)") from None
+    except ValueError as exc:
+        if str(exc).startswith(name):
+            raise
+        raise ValueError(f"{name}: {exc}") from None
+    except MemoryError as exc:
+        raise ValueError(f"{name}: cannot read it: sizes in the file need more memory than "
+                         f"there is ({exc})") from None
+    except RecursionError:
+        raise ValueError(f"{name}: cannot read it: nested too deeply") from None
+    except Exception as exc:  # noqa: BLE001 - any parser failure is the file's problem
+        raise ValueError(f"{name}: cannot read it: {type(exc).__name__}: {exc}") from None
+
+
+class _ReadTimeout(BaseException):
+    """Raised by the deadline's alarm; a BaseException so parsers' ``except Exception``
+    clauses cannot swallow it."""
+
+
+@contextmanager
+def _deadline(seconds: float):
+    """Interrupt the block after ``seconds`` with :class:`_ReadTimeout` (SIGALRM).
+
+    Only in the main thread of a POSIX process with no interval timer already running;
+    elsewhere the block runs without a deadline.
+    """
+    usable = (hasattr(signal, "setitimer") and threading.current_thread() is
+              threading.main_thread() and signal.getitimer(signal.ITIMER_REAL)[0] == 0)
+    if not usable:
+        yield
+        return
+
+    def expire(signum, frame):
+        raise _ReadTimeout
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 def _make_shape(name, pts, *, faces=None, nodes=None, closed=True) -> Shape:
@@ -192,6 +272,9 @@ def _make_shape(name, pts, *, faces=None, nodes=None, closed=True) -> Shape:
     if len(pts) < 3:
         raise ValueError(f"{name}: only {len(pts)} node{'s' if len(pts) != 1 else ''}; a "
                          f"shape needs at least 3")
+    if faces is not None and pts.shape[1] != 3:
+        raise ValueError(f"{name}: has triangles but {pts.shape[1]}D points; triangles "
+                         f"describe 3D surfaces (give a 2D contour without faces)")
     bad = np.flatnonzero(~np.isfinite(pts).all(axis=1))
     if len(bad):
         raise ValueError(f"{name}: node {bad[0]} has non-finite coordinates "
@@ -283,7 +366,7 @@ def _is_number(text: str) -> bool:
 def _load_array(loader, path: Path, name: str, kind: str):
     try:
         return loader(path)
-    except (ValueError, OSError, EOFError) as exc:
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
         raise ValueError(f"{name}: cannot read it as a {kind} file: {exc}") from None
 
 
@@ -291,17 +374,33 @@ def _numeric(name: str, array, what: str) -> np.ndarray:
     array = np.asarray(array)
     if array.dtype.kind not in "iuf":
         raise ValueError(f"{name}: {what} must be numeric, got an array of dtype {array.dtype}")
+    if array.ndim != 2 or array.shape[1] not in (2, 3):
+        got = "a scalar" if array.ndim == 0 else f"shape {array.shape}"
+        raise ValueError(f"{name}: {what} must have shape (m, 2) or (m, 3), got {got}")
     return array
 
 
+def _load_npy(path: Path, name: str) -> np.ndarray:
+    def load(p):
+        with open(p, "rb") as fh:  # np.load(path) leaks its handle when the file is bad
+            return np.load(fh, allow_pickle=False)
+
+    return _load_array(load, path, name, ".npy")
+
+
 def _read_npy(path: Path, name: str) -> np.ndarray:
-    array = _load_array(lambda p: np.load(p, allow_pickle=False), path, name, ".npy")
-    return _numeric(name, array, "the array")
+    return _numeric(name, _load_npy(path, name), "the array")
 
 
 def _read_npz(path: Path, name: str):
+    points, faces, closed = _npz_arrays(path, name)
+    return _numeric(name, points, "'points'"), faces, closed
+
+
+def _npz_arrays(path: Path, name: str):
+    """An .npz file's ``points`` (or only) array as it is, its ``faces`` and ``closed``."""
     def load(p):
-        with np.load(p, allow_pickle=False) as data:
+        with open(p, "rb") as fh, np.load(fh, allow_pickle=False) as data:
             return {key: data[key] for key in data.files}
 
     arrays = _load_array(load, path, name, ".npz")
@@ -312,14 +411,22 @@ def _read_npz(path: Path, name: str):
     else:
         raise ValueError(f"{name}: no array named 'points' among {sorted(arrays)}")
     faces = arrays.get("faces") if "points" in arrays else None
-    closed = bool(arrays["closed"]) if "points" in arrays and "closed" in arrays else None
+    closed = arrays.get("closed") if "points" in arrays else None
+    if closed is not None:
+        if closed.shape != () or closed.dtype.kind not in "biu":
+            raise ValueError(f"{name}: 'closed' must be one boolean, got {closed.dtype} "
+                             f"{closed.shape}")
+        closed = bool(closed)
     if faces is not None:
         faces = _faces(name, faces)
-    return _numeric(name, points, "'points'"), faces, closed
+    return points, faces, closed
 
 
 def _faces(name: str, faces) -> np.ndarray:
-    faces = np.asarray(faces)
+    try:
+        faces = np.asarray(faces)
+    except (ValueError, OverflowError):  # ragged lists, integers beyond int64
+        faces = np.asarray(faces, dtype=object)
     if faces.size == 0:
         return None
     if faces.ndim != 2 or faces.shape[1] != 3 or faces.dtype.kind not in "iu":
@@ -334,8 +441,10 @@ def _read_json(path: Path, name: str):
     except UnicodeDecodeError as exc:
         raise ValueError(f"{name}: not a text file (cannot decode it as UTF-8: "
                          f"{exc.reason} at byte {exc.start})") from None
-    except json.JSONDecodeError as exc:
+    except ValueError as exc:  # JSONDecodeError, or an integer of more than 4300 digits
         raise ValueError(f"{name}: not valid JSON: {exc}") from None
+    except RecursionError:
+        raise ValueError(f"{name}: not readable JSON: nested too deeply") from None
     closed = faces = None
     if isinstance(data, dict):
         if "points" not in data:
@@ -359,7 +468,10 @@ def _read_json(path: Path, name: str):
     for k, row in enumerate(data):
         for value in row:
             if isinstance(value, bool) or not isinstance(value, int | float):
-                raise ValueError(f"{name}: node {k}: {value!r} is not a number")
+                raise ValueError(f"{name}: node {k}: {str(value)[:40]!r} is not a number")
+            if isinstance(value, int) and not -1e308 < value < 1e308:
+                raise ValueError(f"{name}: node {k}: an integer of {len(str(value))} digits "
+                                 f"is too large for a coordinate")
     return np.array(data, dtype=np.float64), faces, closed
 
 
@@ -380,6 +492,8 @@ def _read_svg(path: Path, name: str):
         svg = se.SVG.parse(os.fspath(path))
     except (ET.ParseError, ValueError) as exc:
         raise ValueError(f"{name}: not a valid SVG (XML) file: {exc}") from None
+    if not isinstance(svg, se.SVG):
+        raise ValueError(f"{name}: not an SVG file (its root element is not <svg>)")
     kinds = tuple(getattr(se, tag.capitalize()) for tag in _SVG_TAGS)
     element = next((e for e in svg.elements() if isinstance(e, kinds)), None)  # not <defs>
     if element is None:
@@ -455,6 +569,9 @@ def _image_contour(grey: np.ndarray, name: str, threshold: float | None) -> np.n
     """The outer contour (m, 2) of the largest object of a 2D grey or mask array."""
     from skimage.measure import find_contours
 
+    if grey.dtype.kind == "f" and not np.isfinite(grey).all():
+        raise ValueError(f"{name}: the image has {np.count_nonzero(~np.isfinite(grey))} "
+                         f"non-finite (NaN or inf) pixels")
     levels = np.unique(grey)
     if threshold is None:
         if len(levels) > 2:
@@ -479,6 +596,8 @@ def _image_contour(grey: np.ndarray, name: str, threshold: float | None) -> np.n
 
     padded = np.pad(mask, 1).astype(np.float64)  # closes contours at the image's edge
     contours = find_contours(padded, 0.5)
+    if not contours:
+        raise ValueError(f"{name}: no object outline in the image")
     areas = [_signed_area(c) for c in contours]
     best = contours[int(np.argmax(np.abs(areas)))]
     pts = best[:-1, ::-1] - 1.0  # (row, col) -> (x, y); drop the closing repeat
@@ -521,6 +640,7 @@ def _read_mesh(path: Path, name: str):
     except ImportError as exc:
         raise ImportError(f"reading meshes needs meshio ({exc}); install it with: "
                           f"pip install 'modalmorph[mesh]'") from None
+    _check_mesh_header(path.read_bytes(), name, path.suffix.lower())
     # meshio prints its diagnostics and calls sys.exit() when no reader succeeds; its STL
     # reader overflows a uint32 on purpose while guessing ASCII from binary.
     said = StringIO()
@@ -529,7 +649,9 @@ def _read_mesh(path: Path, name: str):
             warnings.simplefilter("ignore", RuntimeWarning)
             mesh = meshio.read(path)
     except (Exception, SystemExit) as exc:  # meshio raises many types for a bad file
-        detail = " ".join(said.getvalue().split()) or f"{type(exc).__name__}: {exc}"
+        printed = " ".join(said.getvalue().split())
+        detail = printed if isinstance(exc, SystemExit) else f"{type(exc).__name__}: {exc}" + (
+            f" (meshio: {printed})" if printed else "")
         raise ValueError(f"{name}: cannot read the mesh: {detail}") from None
     if said.getvalue().strip():
         warnings.warn(f"{name}: meshio: {' '.join(said.getvalue().split())}", stacklevel=3)
@@ -537,7 +659,8 @@ def _read_mesh(path: Path, name: str):
     triangles = []
     for block in mesh.cells:
         cells = np.asarray(block.data)
-        if block.type.startswith(("triangle", "quad", "polygon")) and cells.ndim == 2:
+        if block.type.startswith(("triangle", "quad", "polygon")) and cells.ndim == 2 and (
+                cells.size):
             corners = {"triangle": 3, "quad": 4}.get(block.type.rstrip("0123456789"))
             cells = cells[:, :corners] if corners else cells  # drop higher-order nodes
             for k in range(1, cells.shape[1] - 1):  # fan: (0, k, k + 1)
@@ -560,6 +683,39 @@ def _read_mesh(path: Path, name: str):
         raise ValueError(f"{name}: every triangle of the mesh is degenerate")
     used = np.unique(faces)
     return points[used], np.searchsorted(used, faces)
+
+
+def _check_mesh_header(data: bytes, name: str, ext: str) -> None:
+    """Refuse what meshio would loop on (header-only and truncated OFF, PLY and ANSYS files)
+    or allocate for: element counts the file's size cannot hold."""
+    if ext == ".off":
+        lines = [ln.split(b"#")[0].split() for ln in data.splitlines()]
+        lines = [ln for ln in lines if ln]
+        head = lines[0][0].decode("latin-1") if lines else ""
+        inline = len(lines[0]) > 1 if lines else False  # "OFF nv nf ne" on one line
+        counts = lines[0][1:] if inline else (lines[1] if len(lines) > 1 else [])
+        if not head.endswith("OFF") or len(counts) < 2 or not all(
+                c.lstrip(b"-").isdigit() for c in counts[:2]):
+            raise ValueError(f"{name}: cannot read the mesh: not an OFF file: it must start "
+                             f"with 'OFF' and the numbers of vertices and faces")
+        nv, nf = int(counts[0]), int(counts[1])
+        body = len(lines) - (1 if inline else 2)
+        if nv < 0 or nf < 0 or nv + nf > body:
+            raise ValueError(f"{name}: cannot read the mesh: the OFF header announces {nv} "
+                             f"vertices and {nf} faces but {body} line(s) follow")
+    elif ext == ".ply":
+        end = data.find(b"end_header")
+        if not data.startswith(b"ply") or end < 0:
+            raise ValueError(f"{name}: cannot read the mesh: not a PLY file: it must start "
+                             f"with 'ply' and have an 'end_header' line")
+        counts = [int(c) for c in re.findall(rb"^element\s+\S+\s+(-?\d+)", data[:end], re.M)]
+        left = len(data) - end - len(b"end_header")
+        if any(c < 0 for c in counts) or sum(counts) > left:
+            raise ValueError(f"{name}: cannot read the mesh: the PLY header announces "
+                             f"{sum(counts)} elements but only {left} bytes follow it")
+    elif ext == ".msh" and data.lstrip()[:1] == b"(" and data.rstrip()[-1:] != b")":
+        raise ValueError(f"{name}: cannot read the mesh: a truncated ANSYS mesh (it does not "
+                         f"end with ')')")
 
 
 # --------------------------------------------------------------------------------------
@@ -723,6 +879,88 @@ def _json_default(obj):
 # atomic output
 
 
+# Temporary files and folders are hidden siblings named ".NAME.modalmorph-tmp-PID-XXXX";
+# one whose process is gone was left by a killed run and is removed by the next writer.
+_TMP_TAG = ".modalmorph-tmp-"
+_LEFTOVER = re.compile(r"^\..*\.modalmorph-tmp-(\d+)-[\w-]+$")
+# A folder that is replaced as a whole must be empty or hold this file (a previous result).
+OUTPUT_MARKER = "result.json"
+# Seconds to sleep just before the final rename(s): read only here, set only by the tests
+# that kill a run at that moment.
+_PAUSE_ENV = "MODALMORPH_TEST_RENAME_PAUSE"
+
+
+def remove_leftovers(folder) -> list[Path]:
+    """Remove the temporary files and folders that killed runs left in ``folder``.
+
+    These are the hidden ``.NAME.modalmorph-tmp-PID-XXXX`` entries whose process ``PID``
+    is no longer running (POSIX only; elsewhere nothing is removed). Returns what was
+    removed.
+    """
+    if os.name != "posix":
+        return []
+    removed = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return []
+    for entry in entries:
+        found = _LEFTOVER.match(entry.name)
+        if found is None or _alive(int(found.group(1))):
+            continue
+        if entry.is_dir(follow_symlinks=False):
+            shutil.rmtree(entry.path, ignore_errors=True)
+        else:
+            with suppress(FileNotFoundError):
+                os.unlink(entry.path)
+        removed.append(Path(entry.path))
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):  # another user's process; not a PID
+        return True
+    return True
+
+
+def _temp_sibling(folder: Path, name: str) -> Path:
+    """A new hidden temporary folder in ``folder``, named after ``name`` and this process."""
+    remove_leftovers(folder)
+    return Path(tempfile.mkdtemp(prefix=f".{name}{_TMP_TAG}{os.getpid()}-", dir=folder))
+
+
+def _pause_for_tests() -> None:
+    seconds = os.environ.get(_PAUSE_ENV)
+    if seconds:
+        import time
+
+        time.sleep(float(seconds))
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two paths in one step (Linux renameat2 RENAME_EXCHANGE); False if unsupported."""
+    if not sys.platform.startswith("linux"):
+        return False
+    import ctypes
+    import errno
+
+    try:
+        renameat2 = ctypes.CDLL(None, use_errno=True).renameat2
+    except (OSError, AttributeError):  # glibc < 2.28, musl
+        return False
+    at_fdcwd, rename_exchange = -100, 2
+    if renameat2(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP):  # file system or kernel
+        return False
+    raise OSError(err, os.strerror(err), os.fspath(b))
+
+
 @contextmanager
 def atomic_write(path):
     """Write one file all or nothing: yield a temporary path beside it, then move it.
@@ -739,7 +977,7 @@ def atomic_write(path):
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp_dir = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    tmp_dir = _temp_sibling(path.parent, path.name)
     try:
         tmp = tmp_dir / path.name
         yield tmp
@@ -753,34 +991,67 @@ def atomic_write(path):
 
 @contextmanager
 def atomic_output_dir(final_dir):
-    """Fill a folder all or nothing: yield a temporary sibling folder to write into.
+    """Write a folder as a whole: yield a new temporary sibling folder to fill, then rename.
 
-    When the block ends normally, everything in the temporary folder is moved into
-    ``final_dir`` (created if needed; same-named files and folders there are replaced,
-    others kept). When it raises, the temporary folder is deleted and ``final_dir`` is
-    left as it was, so a failed run leaves no half-written output.
+    On entry the destination is checked (a folder that exists must be empty or a previous
+    output, holding :data:`OUTPUT_MARKER`) and the temporary folder is created beside it:
+    an unwritable destination fails here, before any work. Temporary folders of killed
+    runs found there are removed (:func:`remove_leftovers`).
+
+    When the block ends normally, the temporary folder becomes ``final_dir`` by one rename;
+    an existing ``final_dir`` is swapped with it in one step (``renameat2`` with
+    ``RENAME_EXCHANGE`` on Linux) or, where that is not supported, renamed aside first.
+    So at every instant ``final_dir`` is the old complete folder, the new complete folder
+    or (only in the fallback, between two renames) absent; the old one is deleted after.
+    Missing parent folders are created only then. When the block raises, the temporary
+    folder is deleted and ``final_dir`` is left as it was.
+
+    Raises
+    ------
+    ValueError
+        If ``final_dir`` exists and is not a folder, is a folder holding other files, or
+        its parent cannot be written. The message starts with ``final_dir`` as given.
 
     Examples
     --------
     >>> with atomic_output_dir("results") as tmp:  # doctest: +SKIP
     ...     save_result(morph, tmp, params=params)
     """
-    final = Path(final_dir)
-    if final.exists() and not final.is_dir():
-        raise ValueError(f"{os.fspath(final_dir)}: exists and is not a directory")
-    parent = final.absolute().parent
-    parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".tmp", dir=parent))
+    name = os.fspath(final_dir)
+    final = Path(os.path.abspath(final_dir))
+    if final.is_symlink() or (final.exists() and not final.is_dir()):
+        raise ValueError(f"{name}: exists and is not a folder")
+    if final.is_dir() and any(final.iterdir()) and not (final / OUTPUT_MARKER).is_file():
+        raise ValueError(f"{name}: a folder with other files in it (no {OUTPUT_MARKER}); the "
+                         f"output folder is replaced as a whole, so give a new or empty one")
+    anchor = final.parent  # the nearest existing ancestor holds the temporary folder
+    while not anchor.is_dir():
+        if anchor.exists() or anchor.parent == anchor:
+            raise ValueError(f"{name}: cannot create the folder: {anchor} is not a folder")
+        anchor = anchor.parent
+    try:
+        tmp = _temp_sibling(anchor, final.name or "out")
+    except OSError as exc:
+        raise ValueError(f"{name}: cannot write the output folder: cannot create a folder in "
+                         f"{anchor} ({exc.strerror})") from None
     try:
         yield tmp
-        final.mkdir(exist_ok=True)
-        for item in sorted(tmp.iterdir()):
-            dest = final / item.name
-            if dest.is_dir() and not dest.is_symlink():
-                shutil.rmtree(dest)
-            elif item.is_dir() and (dest.exists() or dest.is_symlink()):
-                dest.unlink()
-            os.replace(item, dest)
+        try:
+            final.parent.mkdir(parents=True, exist_ok=True)
+            _pause_for_tests()
+            if not final.is_dir():
+                os.rename(tmp, final)
+            elif _exchange(tmp, final):
+                pass  # tmp now holds the old folder, deleted below
+            else:
+                old = tmp.with_name(tmp.name + "-old")
+                os.rename(final, old)
+                _pause_for_tests()
+                os.rename(tmp, final)
+                tmp = old
+        except OSError as exc:
+            raise ValueError(f"{name}: cannot move the output folder into place "
+                             f"({exc.strerror})") from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
@@ -885,12 +1156,10 @@ def _read_sequence(path, threshold, nodes):
         return _image_frames(pages, f"{name}[page {{}}]", threshold, nodes)
     if ext in _TEXT:
         return _csv_frames(path, name, nodes)
-    if ext == ".npy":  # a stack of masks may be boolean
-        array = _load_array(lambda p: np.load(p, allow_pickle=False), path, name, ".npy")
-        array = _numeric(name, array.astype(np.uint8) if array.dtype == bool else array,
-                         "the array")
-    else:
-        array = _read_npz(path, name)[0]
+    array = _load_npy(path, name) if ext == ".npy" else _npz_arrays(path, name)[0]
+    array = array.astype(np.uint8) if array.dtype == bool else array  # a stack of masks
+    if array.dtype.kind not in "iuf":
+        raise ValueError(f"{name}: the array must be numeric, got dtype {array.dtype}")
     if array.ndim != 3:
         return [name], [read_shape(path, threshold=threshold, nodes=nodes)]
     if array.shape[-1] in (2, 3):  # (F, n, d): F shapes

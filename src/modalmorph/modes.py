@@ -264,11 +264,18 @@ def rayleigh(xi1: float, xi2: float, w1: float, w2: float) -> tuple[float, float
     w1, w2 : float
         The two angular frequencies where they hold, ``0 <= w1 < w2``.
     """
+    xi1, xi2, w1, w2 = (np.float64(v) for v in (xi1, xi2, w1, w2))
+    if not np.isfinite([xi1, xi2, w1, w2]).all():
+        raise ValueError(f"Rayleigh damping needs finite values, got xi1={xi1}, xi2={xi2}, "
+                         f"w1={w1}, w2={w2}")
     if xi1 < 0 or xi2 < 0:
         raise ValueError(f"damping ratios must be >= 0, got {xi1}, {xi2}")
     if not 0 <= w1 < w2:
         raise ValueError(f"need 0 <= w1 < w2 for Rayleigh damping, got w1={w1}, w2={w2}")
-    den = w2**2 - w1**2
-    alpha = 2 * w1 * w2 * (xi1 * w2 - xi2 * w1) / den
-    beta = 2 * (xi2 * w2 - xi1 * w1) / den
-    return alpha, beta
+    with np.errstate(all="ignore"):
+        den = w2**2 - w1**2
+        alpha = 2 * w1 * w2 * (xi1 * w2 - xi2 * w1) / den
+        beta = 2 * (xi2 * w2 - xi1 * w1) / den
+    if not (np.isfinite(alpha) and np.isfinite(beta)):
+        raise ValueError(f"Rayleigh coefficients overflow for w1={w1}, w2={w2}")
+    return float(alpha), float(beta)

@@ -29,6 +29,13 @@ _STALL = 5
 # Similarity fields whose modal image is below this fraction of the largest are dependent.
 _RANK_TOL = 1e-10
 FREE_MOTIONS = ("similarity", "none")
+# Option ranges beyond which the integration is meaningless or overflows (the fuzz suite
+# found dt = 1e-300 dividing by zero in Newmark's coefficients and c_x = 1e300 overflowing):
+# k and dt over 12 decades about their defaults; c_x, c_v are fractions of the way (17),
+# (18), where 1 already starts at the target.
+K_RANGE = (1e-6, 1e6)
+DT_RANGE = (1e-6, 1e6)
+C_MAX = 10.0
 LOADS = ("consistent", "nodal")
 
 
@@ -258,7 +265,7 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
     _check_options(k=k, dt=dt, damping=damping, scheme=scheme, tol=tol,
                    tol_distance=tol_distance, max_steps=max_steps, neighbours=neighbours,
                    model_nodes=model_nodes, unmatched=unmatched, free_motion=free_motion,
-                   loads=loads)
+                   loads=loads, c_x=c_x, c_v=c_v, equilibrium_tol=equilibrium_tol)
     check_newmark(alpha, delta)
     check_sigma(sigma)
     if matching is None:
@@ -575,11 +582,22 @@ def _mode_count(modes, total, *, sparse):
 
 
 def _check_options(*, k, dt, damping, scheme, tol, tol_distance, max_steps, neighbours,
-                   model_nodes, unmatched, free_motion, loads):
+                   model_nodes, unmatched, free_motion, loads, c_x, c_v, equilibrium_tol):
     if not np.isfinite(k) or k <= 0:
         raise ValueError(f"k must be a positive number, got {k}")
+    if not K_RANGE[0] <= k <= K_RANGE[1]:
+        raise ValueError(f"k must lie in [{K_RANGE[0]:g}, {K_RANGE[1]:g}] (x one node's "
+                         f"stiffness), got {k:g}")
     if not np.isfinite(dt) or dt <= 0:
         raise ValueError(f"dt must be a positive number, got {dt}")
+    if not DT_RANGE[0] <= dt <= DT_RANGE[1]:
+        raise ValueError(f"dt must lie in [{DT_RANGE[0]:g}, {DT_RANGE[1]:g}] (x 1/omega_ref), "
+                         f"got {dt:g}")
+    for name, value in (("c_x", c_x), ("c_v", c_v)):
+        if not (np.isfinite(value) and 0 <= value <= C_MAX):
+            raise ValueError(f"{name} must be a number in [0, {C_MAX:g}], got {value!r}")
+    if not (np.isfinite(equilibrium_tol) and equilibrium_tol >= 0):
+        raise ValueError(f"equilibrium_tol must be a number >= 0, got {equilibrium_tol!r}")
     if not (np.ndim(damping) == 0 and np.isfinite(damping) and damping > 0 or np.shape(
             damping) == (2,) and np.all(np.isfinite(damping)) and min(damping) >= 0):
         raise ValueError(f"damping must be a ratio > 0 or two ratios >= 0, got {damping!r}")

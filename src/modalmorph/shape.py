@@ -12,6 +12,9 @@ __all__ = ["Shape", "as_shape", "coarsen", "resample", "spread_indices"]
 
 # Two nodes closer than this fraction of the object's RMS radius are "the same node".
 _REPEAT_TOL = 1e-9
+# Coordinates beyond this magnitude are refused: sums of squared distances between such
+# nodes (up to 1e6 of them) would overflow float64 (1.8e308): (2e150)^2 * 1e6 = 4e306.
+MAX_COORDINATE = 1e150
 # An object whose RMS radius is below this fraction of its coordinates' magnitude is a point.
 _POINT_TOL = 1e-10
 
@@ -115,6 +118,8 @@ class Shape:
 
 
 def _validate_points(points, name: str) -> np.ndarray:
+    if np.iscomplexobj(points):
+        raise ValueError(f"{name} must be real coordinates, got complex numbers")
     try:
         pts = np.array(points, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -127,6 +132,10 @@ def _validate_points(points, name: str) -> np.ndarray:
     if bad.any():
         raise ValueError(f"{name} has non-finite coordinates (NaN or inf) at node(s) "
                          f"{np.flatnonzero(bad)[:10].tolist()}")
+    big = np.abs(pts).max(axis=1) > MAX_COORDINATE
+    if big.any():
+        raise ValueError(f"{name} has coordinates beyond +-{MAX_COORDINATE:g} at node(s) "
+                         f"{np.flatnonzero(big)[:10].tolist()}: too large to compute with")
     centred = pts - pts.mean(axis=0)
     size = np.sqrt(np.mean(np.sum(centred**2, axis=1)))
     magnitude = max(1.0, float(np.abs(pts).max()))
