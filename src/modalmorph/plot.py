@@ -673,7 +673,6 @@ def save_figures(morph, out_dir, *, formats=("png", "svg"), dpi: int = 200) -> l
     if isinstance(formats, str):
         formats = (formats,)
     _matplotlib()
-    from matplotlib.figure import Figure
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -695,11 +694,19 @@ def save_figures(morph, out_dir, *, formats=("png", "svg"), dpi: int = 200) -> l
         "shapes_energy": lambda ax: plot_shapes(morph, color_by="energy", ax=ax),
         "energy": lambda ax: plot_energy(morph, ax=ax),
     }
+    return _save_draws(draws, out, dim, flat=("energy", (6.4, 4.0)), formats=formats, dpi=dpi)
+
+
+def _save_draws(draws: dict, out: Path, dim: int, *, flat: tuple, formats, dpi) -> list[Path]:
+    """Draw each figure of ``draws`` (stem -> function of an Axes) on its own Figure and
+    save it in every format; ``flat = (stem, figsize)`` names the one 2D chart."""
+    from matplotlib.figure import Figure
+
     paths = []
     for stem, draw in draws.items():
-        flat = stem == "energy"
-        fig = Figure(figsize=(6.4, 4.0) if flat else (6.4, 5.2), layout="constrained")
-        draw(_axes_for(fig, 2 if flat else dim))
+        chart = stem == flat[0]
+        fig = Figure(figsize=flat[1] if chart else (6.4, 5.2), layout="constrained")
+        draw(_axes_for(fig, 2 if chart else dim))
         for fmt in formats:
             p = out / f"{stem}.{fmt}"
             fig.savefig(p, dpi=dpi)
@@ -787,7 +794,6 @@ def save_track_figures(track, out_dir, *, formats=("png",), dpi: int = 150) -> l
     if isinstance(formats, str):
         formats = (formats,)
     _matplotlib()
-    from matplotlib.figure import Figure
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -796,16 +802,7 @@ def save_track_figures(track, out_dir, *, formats=("png",), dpi: int = 150) -> l
              "curves": lambda ax: plot_track_curves(track, ax=ax),
              "frames_energy": lambda ax: plot_shapes(_as_morph(track), color_by="energy",
                                                      ax=ax)}
-    paths = []
-    for stem, draw in draws.items():
-        flat = stem == "curves"
-        fig = Figure(figsize=(7.0, 4.0) if flat else (6.4, 5.2), layout="constrained")
-        draw(_axes_for(fig, 2 if flat else dim))
-        for fmt in formats:
-            p = out / f"{stem}.{fmt}"
-            fig.savefig(p, dpi=dpi)
-            paths.append(p)
-    return paths
+    return _save_draws(draws, out, dim, flat=("curves", (7.0, 4.0)), formats=formats, dpi=dpi)
 
 
 def animate_track(track, path, *, fps: int = 8, dpi: int = 100) -> Path:
