@@ -52,7 +52,8 @@ def _matplotlib():
     try:
         import matplotlib
     except ImportError as exc:  # pragma: no cover - exercised on a bare install
-        raise ImportError("plotting needs matplotlib: pip install 'modalmorph[plot]'") from exc
+        raise ImportError("plotting needs matplotlib (a dependency of modalmorph): "
+                          "pip install matplotlib") from exc
     return matplotlib
 
 
@@ -407,7 +408,7 @@ def plot_energy(morph, *, ax=None):
     steps = np.arange(len(energy))
     marker = "o" if len(steps) <= 40 else None
     (e_line,) = ax.plot(steps, energy, color="#1f4e99", marker=marker, ms=4,
-                        label="global strain energy $E = U^T K U$")
+                        label="global strain energy $E$ (22)")
     ax.set(xlabel="step", ylabel="global strain energy $E$", xlim=(0, max(len(steps) - 1, 1)))
     ax.set_ylim(bottom=min(0.0, float(np.nanmin(energy))))
     ax.yaxis.get_major_formatter().set_powerlimits((-3, 4))
@@ -608,7 +609,8 @@ def write_vtk_series(morph, out_dir, *, name: str = "morph") -> Path:
     try:
         import meshio
     except ImportError as exc:  # pragma: no cover - exercised on a bare install
-        raise ImportError("writing VTK needs meshio: pip install 'modalmorph[mesh]'") from exc
+        raise ImportError("writing VTK needs meshio (a dependency of modalmorph): "
+                          "pip install meshio") from exc
     from xml.sax.saxutils import quoteattr
 
     out = Path(out_dir)
