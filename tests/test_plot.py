@@ -246,13 +246,13 @@ def test_write_vtk_series(tmp_path, morph):
     assert last.cells[0].type == expected[kind]
 
 
-def test_missing_extras_name_what_to_install(tmp_path, monkeypatch):
+def test_missing_dependencies_name_what_to_install(tmp_path, monkeypatch):
     morph = circle_to_ellipse()
     monkeypatch.setitem(sys.modules, "meshio", None)
-    with pytest.raises(ImportError, match=r"modalmorph\[mesh\]"):
+    with pytest.raises(ImportError, match=r"pip install meshio"):
         write_vtk_series(morph, tmp_path)
     monkeypatch.setitem(sys.modules, "matplotlib", None)
-    with pytest.raises(ImportError, match=r"modalmorph\[plot\]"):
+    with pytest.raises(ImportError, match=r"pip install matplotlib"):
         save_figures(morph, tmp_path)
 
 
