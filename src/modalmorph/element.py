@@ -143,15 +143,21 @@ def auto_sigma(shape, nominal: float = DEFAULT_SIGMA) -> float:
     find it. Objects too large for a dense Gram matrix (more than ``AUTO_DENSE_MAX_DOF``
     degrees of freedom) get ``nominal``: their solvers check the conditioning themselves.
     """
+    return _auto_sigma(shape, nominal)[0]
+
+
+def _auto_sigma(shape, nominal: float) -> tuple[float, float | None]:
+    """:func:`auto_sigma` and log10 of Gamma's condition number there (None when not
+    computed: objects too large for a dense Gram matrix)."""
     shape = as_shape(shape)
     if shape.dim * shape.m > AUTO_DENSE_MAX_DOF:
-        return float(nominal)
+        return float(nominal), None
     x = shape.normalized
     r2 = np.maximum(np.sum(x**2, 1)[:, None] + np.sum(x**2, 1)[None, :] - 2 * x @ x.T, 0.0)
     h, target = shape.spacing, np.log10(AUTO_CONDITION)
     hi, c_hi = float(nominal), _log_condition(r2, nominal * h)
     if c_hi <= target:
-        return hi
+        return hi, c_hi
     lo, c_lo = hi, c_hi
     while c_lo > target and lo > MIN_SIGMA:  # halve until well conditioned
         hi, c_hi = lo, c_lo
@@ -166,7 +172,7 @@ def auto_sigma(shape, nominal: float = DEFAULT_SIGMA) -> float:
             lo, c_lo = s, c
         else:
             hi, c_hi = s, c
-    return lo
+    return lo, c_lo
 
 
 def check_sigma(sigma) -> None:
@@ -200,6 +206,9 @@ class FEModel:
         (:func:`auto_sigma`). A given value is used as it is, and refused with a
         ``ValueError`` (naming the largest width that works) when the Gram matrix is
         numerically singular. The width used is :attr:`sigma_rel`.
+    nominal_sigma : float, optional
+        The width ``sigma=None`` starts from (default ``DEFAULT_SIGMA``; the matcher's
+        models use 2).
     material : Material, optional
         The material filling the object (default: polyethylene, the paper's choice).
     plane : {"stress", "strain"}, optional
@@ -238,7 +247,8 @@ class FEModel:
 
     def __init__(self, shape, *, sigma: float | None = None,
                  material: Material = POLYETHYLENE, plane: str = "stress",
-                 solver: str = "auto", cutoff: float | None = None):
+                 solver: str = "auto", cutoff: float | None = None,
+                 nominal_sigma: float = DEFAULT_SIGMA):
         self.shape: Shape = as_shape(shape)
         check_sigma(sigma)
         if not isinstance(material, Material):
@@ -255,7 +265,12 @@ class FEModel:
         if cutoff is None:
             cutoff = MULTILEVEL_CUTOFF if solver == "multilevel" else DEFAULT_CUTOFF
         self.cutoff = float(cutoff)
-        self.sigma_rel = auto_sigma(self.shape) if sigma is None else float(sigma)
+        if sigma is None:
+            self.sigma_rel, log_cond = _auto_sigma(self.shape, nominal_sigma)
+            if log_cond is not None:  # measured on the way: no second eigensolve
+                self.__dict__["gamma_condition"] = 10.0**log_cond
+        else:
+            self.sigma_rel = float(sigma)
         self.material = material
         self.plane = plane
         if self.dim == 2:
@@ -283,6 +298,12 @@ class FEModel:
     def sigma(self) -> float:
         """Absolute Gaussian width in the normalised frame."""
         return self.sigma_rel * self.shape.spacing
+
+    @cached_property
+    def gamma_condition(self) -> float:
+        """Condition number of the dense Gram matrix ``Gamma`` (inf when singular)."""
+        ev = np.linalg.eigvalsh(self.gram[1])
+        return float(ev[-1] / ev[0]) if ev[0] > 0 else np.inf
 
     @property
     def cutoff_radius(self) -> float:

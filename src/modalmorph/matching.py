@@ -30,7 +30,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from .align import Similarity, align
-from .element import FEModel, auto_sigma, check_sigma
+from .element import FEModel, check_sigma
 from .match3d import refine
 from .shape import Shape, as_shape, resample, spread_indices
 
@@ -175,8 +175,7 @@ def modal_features(shape, n_modes: int, *, sigma: float | None = None,
         subset = spread_indices(shape, max_nodes)
         model_shape = shape if len(subset) == shape.m else Shape(
             shape.points[subset], closed=shape.closed, ordered=shape.ordered)
-    model = FEModel(model_shape, sigma=auto_sigma(model_shape, DEFAULT_SIGMA)
-                    if sigma is None else sigma)
+    model = FEModel(model_shape, sigma=sigma, nominal_sigma=DEFAULT_SIGMA)
     n_modes = min(int(n_modes), model.dim * model.m)
     modes = model.modes(n_modes)
     if model_shape is shape:

@@ -67,8 +67,7 @@ def solve_modes(model, n: int) -> Modes:
 
     d, m = model.dim, model.m
     G, Gamma = model.gram
-    lam_g = np.linalg.eigvalsh(Gamma)
-    cond = lam_g[-1] / lam_g[0] if lam_g[0] > 0 else np.inf
+    cond = model.gamma_condition
     L, info = lapack.dpotrf(Gamma, lower=1, clean=1)
     if info == 0:
         Linv, info = lapack.dtrtri(L, lower=1)

@@ -119,7 +119,7 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
           dt: float = 0.1, alpha: float = 0.25, delta: float = 0.5,
           damping: float | tuple[float, float] = 1.0, c_x: float = 0.0, c_v: float = 0.0,
           material: Material = POLYETHYLENE, sigma: float | None = None,
-          modes: int | float | None = None, solver: str = "auto", model_nodes: int = 300,
+          modes: int | float | None = None, solver: str = "auto", model_nodes: int = 400,
           scheme: str = "implicit", tol: float = 0.005,
           tol_distance: float | None = None, max_steps: int = 100,
           equilibrium_tol: float = 1e-5, unmatched: str = "arclength", neighbours: int = 6,
@@ -209,8 +209,12 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
         nodes spread evenly over it (by arc length for contours), and every node moves with
         the element's displacement field ``u(x) = sum_k h_k(x) U_k`` (3)-(4); its load
         enters through the same field (consistent nodal loads), and the local energy is
-        spread from the model nodes over the nodes around them.
-    solver : {"auto", "dense", "sparse"}, optional
+        spread from the model nodes over the nodes around them. The default, 400, was
+        measured: with 300, 4 of the 186 glyph outlines at 400 nodes folded for 1-4 steps
+        beside a serif (the interpolated field lets neighbouring nodes overtake where the
+        displacement turns sharply); with 400, none, at twice the cost of a 1000-node
+        morph (0.16 -> 0.28 s, still 22x the dense transcription).
+    solver : {"auto", "dense", "sparse", "multilevel"}, optional
         Eigensolver of the model (see :class:`FEModel`): ``"auto"`` uses the exact dense
         one for small objects and the truncated sparse one for large objects.
     scheme : {"implicit", "explicit"}, optional
@@ -529,9 +533,8 @@ def _similarity_free(frequencies: np.ndarray, B: np.ndarray) -> np.ndarray:
     """
     W = frequencies[:, None] * B
     U, sv, _ = np.linalg.svd(W, full_matrices=False)
-    U = U[:, sv > _RANK_TOL * sv.max()]
-    Om = np.diag(frequencies)
-    K = Om @ Om - (Om @ U) @ (U.T @ Om)
+    OmU = frequencies[:, None] * U[:, sv > _RANK_TOL * sv.max()]
+    K = np.diag(frequencies**2) - OmU @ OmU.T
     return (K + K.T) / 2
 
 
