@@ -450,7 +450,11 @@ def _one_blas_thread():
 
 @contextlib.contextmanager
 def _on_dask(client, scheduler, workers):
-    from distributed import Client, LocalCluster, as_completed
+    try:
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError as exc:
+        raise ImportError("a Dask engine, scheduler or client needs Dask: pip install "
+                          "'modalmorph[dask]'") from exc
 
     with contextlib.ExitStack() as stack:
         if client is None and scheduler is not None:
