@@ -75,7 +75,7 @@ class Item:
 
     def __post_init__(self):
         if not isinstance(self.id, str) or not self.id or self.id.startswith(".") \
-                or any(c in self.id for c in '/\\:*?"<>|') or self.id == "summary":
+                or any(c in self.id for c in '/\\:*?"<>|'):
             raise ValueError(f"item id must be a plain folder name (no path separators, "
                              f"not starting with '.'), got {self.id!r}")
         pair = self.source is not None and self.target is not None
@@ -184,8 +184,6 @@ def read_manifest(path) -> list[Item]:
         entry = _resolve(row, path.parent)
         try:
             item = Item(**entry)
-        except TypeError as exc:
-            raise ValueError(f"{where}: {exc}") from None
         except ValueError as exc:
             raise ValueError(f"{where}: {exc}") from None
         if item.id in seen:
@@ -484,8 +482,8 @@ def _on_dask(client, scheduler, workers):
                         done(future.result())
                     except Exception as exc:  # the worker died (KilledWorker), ...
                         done(_failed(item, exc))
-            finally:
-                client.cancel(list(futures))
+            finally:  # Ctrl-C: what has not started will not
+                client.cancel([future for future in futures if not future.done()])
 
         yield submit, wait, name, dashboard
 
