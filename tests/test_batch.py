@@ -191,3 +191,19 @@ def test_manifest_errors(tmp_path):
 def _toml(path, body):
     path.write_text("[[item]]\n" + body)
     return path
+
+
+def test_figures_all_and_summary(data, tmp_path):
+    """--figures all: an item's folder holds what morph writes with its figures and GIF;
+    --figures summary: one figure of the batch."""
+    from modalmorph.batch import run_item, write_summary
+
+    item = Item(id="hands", source=str(data / "h0.csv"), target=str(data / "h3.csv"))
+    row = run_item(item, tmp_path / "out", figures="all")
+    assert row.status == "ok", row.error
+    assert main(["morph", item.source, item.target, "--out", str(tmp_path / "ref"), "-q"]) == 0
+    assert sorted(p.name for p in (tmp_path / "out" / "hands").iterdir()) == \
+        sorted(p.name for p in (tmp_path / "ref").iterdir())
+    written = write_summary([row], tmp_path / "out", figure=True)
+    assert (tmp_path / "out" / "summary.png") in written
+    assert (tmp_path / "out" / "summary.png").stat().st_size > 0

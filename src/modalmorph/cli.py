@@ -206,6 +206,10 @@ def _parser() -> argparse.ArgumentParser:
                             "and animation too, as morph and track write them")
     batch.add_argument("--force", action="store_true",
                        help="redo items already complete in OUT")
+    batch.add_argument("--nodes", type=int, default=None,
+                       help="resample 2D contours to this many nodes (as in morph, track)")
+    batch.add_argument("--threshold", type=float, default=None,
+                       help="grey images: level separating object from background")
     _add_morph_options(batch)
     batch.set_defaults(run=_run_batch)
     return parser
