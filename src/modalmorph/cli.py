@@ -1,7 +1,12 @@
-"""The ``modalmorph`` command line: ``demo``, ``match``, ``morph``, ``track`` and ``app``.
+"""The ``modalmorph`` command line: ``demo``, ``match``, ``morph``, ``track``, ``batch``
+and ``app``.
 
 Exit codes: 0 success, 2 bad input or usage (a one-line message naming the file and the
-problem), 1 a run that did not converge when ``--strict`` is given.
+problem), 1 a run that did not converge when ``--strict`` is given or a batch with a failed
+item, 130 a batch interrupted by Ctrl-C.
+
+:func:`morph_files` and :func:`track_files` are what ``morph`` and ``track`` do for one
+item (read, compute, write one output folder); :mod:`modalmorph.batch` runs them per item.
 """
 
 from __future__ import annotations
@@ -11,12 +16,14 @@ import contextlib
 import logging
 import sys
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 from . import __version__
 from .track import CORRESPONDENCES, REFERENCES
 
-__all__ = ["main"]
+__all__ = ["main", "ItemRun", "morph_files", "track_files", "check_options",
+           "load_config"]
 
 log = logging.getLogger("modalmorph")
 
@@ -40,6 +47,21 @@ _ROTATION_HELP = ("auto (default): keep the common frame of the two inputs unles
 
 class UsageError(ValueError):
     """Bad input or usage: reported in one line with exit code 2."""
+
+
+@dataclass(frozen=True)
+class ItemRun:
+    """What one ``morph`` or ``track`` run computed, and the files it wrote.
+
+    Attributes
+    ----------
+    result : Morph or Track
+    files : tuple of Path
+        The files written, under the output folder.
+    """
+
+    result: object
+    files: tuple
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -172,6 +194,40 @@ def _parser() -> argparse.ArgumentParser:
     o.add_argument("--no-gif", dest="gif", action="store_false", help="skip the GIF")
     track.set_defaults(run=_run_track)
 
+    batch = sub.add_parser("batch", parents=[common],
+                           help="many pairs and sequences, on this machine or a Dask cluster",
+                           description="Run morph (source,target pairs) and track (frames) "
+                                       "for every item of a manifest, each into OUT/<id>/ "
+                                       "exactly as the single commands write it, and write "
+                                       "OUT/summary.csv. Items already complete in OUT are "
+                                       "skipped; a failing item is recorded and the batch "
+                                       "goes on. Exit code 1 when an item failed.")
+    batch.add_argument("manifest", type=Path, metavar="MANIFEST",
+                       help="CSV (columns id, source, target or frames, and any option "
+                            "below with underscores; cells are TOML values) or TOML "
+                            "([[item]] tables with the same keys); paths relative to it")
+    batch.add_argument("--out", type=Path, required=True, help="output folder")
+    batch.add_argument("--workers", type=int, default=None,
+                       help="worker processes on this machine (default: one per core)")
+    batch.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="address of a running Dask scheduler (tcp://host:port): run "
+                            "there; inputs and OUT must be reachable by its workers")
+    batch.add_argument("--engine", choices=("auto", "dask", "processes"), default="auto",
+                       help="auto (default): Dask when installed (modalmorph[dask]), "
+                            "else a local process pool")
+    batch.add_argument("--figures", choices=("none", "summary", "all"), default="none",
+                       help="none (default): results only; summary: also one figure of "
+                            "the whole batch (OUT/summary.png); all: every item's figures "
+                            "and animation too, as morph and track write them")
+    batch.add_argument("--force", action="store_true",
+                       help="redo items already complete in OUT")
+    batch.add_argument("--nodes", type=int, default=None,
+                       help="resample 2D contours to this many nodes (as in morph, track)")
+    batch.add_argument("--threshold", type=float, default=None,
+                       help="grey images: level separating object from background")
+    _add_morph_options(batch)
+    batch.set_defaults(run=_run_batch)
+
     app = sub.add_parser("app", parents=[common], help="the interactive web application",
                          description="Serve the method as a local web page: pick two shapes, "
                                      "set the options, run, and explore the result.")
@@ -280,14 +336,14 @@ def _add_inputs(parser):
 # ------------------------------------------------------------------------------ commands
 
 
-def _read_pair(args, options):
+def _read_pair(source_path, target_path, options):
     from .io import read_shape
 
     kw = dict(nodes=options.get("nodes"), threshold=options.get("threshold"))
-    source = read_shape(args.source, **kw)
-    target = read_shape(args.target, **kw)
+    source = read_shape(source_path, **kw)
+    target = read_shape(target_path, **kw)
     if source.dim != target.dim:
-        raise UsageError(f"{args.source} is {source.dim}D but {args.target} is "
+        raise UsageError(f"{source_path} is {source.dim}D but {target_path} is "
                          f"{target.dim}D: both shapes must have the same dimension")
     return source, target
 
@@ -299,7 +355,7 @@ def _run_match(args) -> int:
     from .matching import match
 
     options = {"nodes": args.nodes, "threshold": args.threshold}
-    source, target = _read_pair(args, options)
+    source, target = _read_pair(args.source, args.target, options)
     kw = {key: val for key, val in (("method", args.method), ("sigma", args.sigma),
                                     ("rotation", args.rotation)) if val is not None}
     result = match(source, target, **kw)
@@ -325,61 +381,20 @@ def _run_match(args) -> int:
 
 
 def _run_morph(args) -> int:
-    options = _load_config(args.config) if args.config else {}
-    for key in (*_MORPH_OPTIONS, *_OTHER_OPTIONS):
-        value = getattr(args, key, None)
-        if value is not None:
-            options[key] = value
-    from .io import atomic_output_dir
-
-    with atomic_output_dir(args.out) as folder:  # checks --out before any work
-        source, target = _read_pair(args, options)
-        result = _morph(source, target, options, quiet=args.quiet)
-        written = _write_outputs(result, folder, figures=args.figures, gif=args.gif,
-                                 mp4=args.mp4, vtk=args.vtk)
-        if args.html:
-            from .report import input_images, write_html
-
-            write_html(result, folder / "report.html",
-                       title=f"{args.source.name} → {args.target.name}",
-                       images=input_images(args.source, args.target))
-            written.append("report.html")
-    written = [args.out / name for name in written]
+    run = morph_files(args.source, args.target, args.out, _options(args),
+                      figures=args.figures, gif=args.gif, mp4=args.mp4, vtk=args.vtk,
+                      html=args.html, quiet=args.quiet)
     if not args.quiet:
-        _report(result, written)
-    return 1 if args.strict and not result.converged else 0
+        _report(run.result, run.files)
+    return 1 if args.strict and not run.result.converged else 0
 
 
 def _run_track(args) -> int:
-    from .io import atomic_output_dir, read_frames, save_track
-    from .track import track
-
-    options = _load_config(args.config) if args.config else {}
-    for key in (*_MORPH_OPTIONS, *_OTHER_OPTIONS):
-        value = getattr(args, key, None)
-        if value is not None:
-            options[key] = value
-    frames = read_frames(args.inputs, threshold=options.get("threshold"),
-                         nodes=options.get("nodes"))
-    match_kw = _match_kwargs(options)
-    with _progress(len(frames.shapes) - 1, quiet=args.quiet, what="tracking") as progress:
-        result = track(frames.shapes, names=frames.names, reference=args.reference,
-                       correspondence=args.correspondence, cycle=args.cycle,
-                       segments=args.segments, start_node=args.start_node,
-                       match_options=match_kw if args.correspondence == "modal" else None,
-                       morph_options=_morph_kwargs(options),
-                       progress=None if progress is None else
-                       (lambda f, n: progress(f, None)))
-    with atomic_output_dir(args.out) as tmp:
-        save_track(result, tmp)
-        if args.figures or args.gif:
-            from . import plot
-
-            if args.figures:
-                plot.save_track_figures(result, tmp)
-            if args.gif:
-                plot.animate_track(result, tmp / "track.gif")
-        names = sorted(p.relative_to(tmp) for p in tmp.rglob("*") if p.is_file())
+    run = track_files(args.inputs, args.out, _options(args), reference=args.reference,
+                      correspondence=args.correspondence, cycle=args.cycle,
+                      segments=args.segments, start_node=args.start_node,
+                      figures=args.figures, gif=args.gif, quiet=args.quiet)
+    result = run.result
     if not args.quiet:
         worst = float(result.distance.max())
         print(f"  {result.n_frames} frames of {result.points.shape[1]} nodes; largest "
@@ -387,8 +402,8 @@ def _run_track(args) -> int:
               f"{result.strain.max():+.3f}" + ("" if result.closure_error is None else
                                                f"; closure error {result.closure_error:.3g}"),
               file=sys.stderr)
-        for name in names:
-            print(f"  wrote {args.out / name}")
+        for path in run.files:
+            print(f"  wrote {path}")
     return 0
 
 
@@ -397,6 +412,114 @@ def _run_app(args) -> int:
 
     serve(args.host, args.port, open_browser=args.open)
     return 0
+
+
+def _run_batch(args) -> int:
+    from . import batch
+
+    items = batch.read_manifest(args.manifest)
+    logging.getLogger("distributed").setLevel(logging.WARNING)  # not a line per worker event
+    with _progress(len(items), quiet=args.quiet, what="batch", unit="item") as progress:
+        done = batch.run(items, args.out, options=_options(args), figures=args.figures,
+                         force=args.force, workers=args.workers, scheduler=args.scheduler,
+                         engine=args.engine, progress=None if progress is None else
+                         (lambda row, n, total: progress(n, None)))
+    failed = [row for row in done.results if row.status != "ok" and row.status != "skipped"]
+    if not args.quiet:
+        counts = {s: sum(row.status == s for row in done.results)
+                  for s in ("ok", "skipped", "failed", "interrupted")}
+        print(f"  {len(items)} items: " + ", ".join(f"{n} {s}" for s, n in counts.items()
+                                                    if n) + f" ({done.engine})",
+              file=sys.stderr)
+        for row in failed:
+            print(f"  {row.id}: {row.status}: {row.error}", file=sys.stderr)
+        for path in done.files:
+            print(f"  wrote {path}")
+    if done.interrupted:
+        return 130
+    return 1 if failed else 0
+
+
+def morph_files(source, target, out, options: dict, *, figures: bool = True,
+                gif: bool = True, mp4: bool = False, vtk: bool = False, html: bool = False,
+                quiet: bool = True) -> ItemRun:
+    """What ``modalmorph morph`` does: read two shape files, morph, write ``out``.
+
+    ``out`` is filled all or nothing (:func:`modalmorph.io.atomic_output_dir`).
+
+    Parameters
+    ----------
+    source, target : str or os.PathLike
+        Shape files (any format of :func:`modalmorph.io.read_shape`).
+    out : str or os.PathLike
+        Output folder.
+    options : dict
+        Options as in a ``--config`` file (:func:`check_options`).
+    figures, gif, mp4, vtk, html : bool, optional
+        Which renderings to write beside the results (html: the self-contained report,
+        :func:`modalmorph.report.write_html`).
+    quiet : bool, optional
+        No progress bar.
+
+    Returns
+    -------
+    ItemRun
+        The :class:`modalmorph.Morph` and the files written.
+    """
+    from .io import atomic_output_dir
+
+    out = Path(out)
+    with atomic_output_dir(out) as folder:  # checks out before any work
+        shapes = _read_pair(source, target, options)
+        result = _morph(*shapes, options, quiet=quiet)
+        written = _write_outputs(result, folder, figures=figures, gif=gif, mp4=mp4, vtk=vtk)
+        if html:
+            from .report import input_images, write_html
+
+            write_html(result, folder / "report.html",
+                       title=f"{Path(source).name} → {Path(target).name}",
+                       images=input_images(Path(source), Path(target)))
+            written.append(Path("report.html"))
+    return ItemRun(result=result, files=tuple(out / name for name in written))
+
+
+def track_files(inputs, out, options: dict, *, reference: str = "previous",
+                correspondence: str = "nearest", cycle: bool = False, segments: int = 6,
+                start_node: int = 0, figures: bool = True, gif: bool = True,
+                quiet: bool = True) -> ItemRun:
+    """What ``modalmorph track`` does: read the frames, track, write ``out``.
+
+    ``inputs`` is anything :func:`modalmorph.io.read_frames` reads; ``options`` as in a
+    ``--config`` file; ``reference`` .. ``start_node`` as in :func:`modalmorph.track`.
+    ``out`` is filled all or nothing. Returns the :class:`modalmorph.Track` and the files
+    written.
+    """
+    from .io import atomic_output_dir, read_frames, save_track
+    from .track import track
+
+    frames = read_frames(inputs, threshold=options.get("threshold"),
+                         nodes=options.get("nodes"))
+    match_kw = _match_kwargs(options)
+    with _progress(len(frames.shapes) - 1, quiet=quiet, what="tracking") as progress:
+        result = track(frames.shapes, names=frames.names, reference=reference,
+                       correspondence=correspondence, cycle=cycle,
+                       segments=segments, start_node=start_node,
+                       match_options=match_kw if correspondence == "modal" else None,
+                       morph_options=_morph_kwargs(options),
+                       progress=None if progress is None else
+                       (lambda f, n: progress(f, None)))
+    out = Path(out)
+    with atomic_output_dir(out) as tmp:
+        save_track(result, tmp)
+        if figures or gif:
+            from . import plot
+
+            if figures:
+                plot.save_track_figures(result, tmp)
+            if gif:
+                plot.animate_track(result, tmp / "track.gif")
+        names = sorted(p.relative_to(tmp) for p in tmp.rglob("*") if p.is_file())
+    return ItemRun(result=result, files=tuple(out / name for name in names))
 
 
 def _run_demo(args) -> int:
@@ -434,6 +557,16 @@ def _morph(source, target, options, *, quiet: bool):
     matching = match(source, target, **_match_kwargs(options))
     with _progress(kw.get("max_steps", 100), quiet=quiet) as progress:
         return morph(source, target, matching=matching, progress=progress, **kw)
+
+
+def _options(args) -> dict:
+    """The merged options: the --config file, then the command line's."""
+    options = load_config(args.config) if args.config else {}
+    for key in (*_MORPH_OPTIONS, *_OTHER_OPTIONS):
+        value = getattr(args, key, None)
+        if value is not None:
+            options[key] = value
+    return options
 
 
 def _match_kwargs(options) -> dict:
@@ -491,7 +624,8 @@ def _parse_modes(value):
             from None
 
 
-def _load_config(path: Path) -> dict:
+def load_config(path: Path) -> dict:
+    """Options from a TOML ``--config`` file, checked by :func:`check_options`."""
     try:
         import tomllib
     except ModuleNotFoundError:  # Python 3.10
@@ -503,22 +637,32 @@ def _load_config(path: Path) -> dict:
         raise UsageError(f"{path}: config file not found") from None
     except tomllib.TOMLDecodeError as exc:
         raise UsageError(f"{path}: not valid TOML: {exc}") from None
-    known = {**_MORPH_OPTIONS, **_OTHER_OPTIONS}
-    for key, value in config.items():
+    return check_options(config, path)
+
+
+def check_options(options: dict, where, *, extra: dict | None = None) -> dict:
+    """Check the names and types of options as a ``--config`` file gives them.
+
+    ``extra`` maps more known names to their types; ``where`` (a path, or a path and
+    line) starts the messages. Returns a copy. Raises ``ValueError`` (``UsageError``)
+    for an unknown name or a value of the wrong type.
+    """
+    known = {**_MORPH_OPTIONS, **_OTHER_OPTIONS, **(extra or {})}
+    for key, value in options.items():
         if key not in known:
-            raise UsageError(f"{path}: unknown option {key!r}; known: {', '.join(known)}")
+            raise UsageError(f"{where}: unknown option {key!r}; known: {', '.join(known)}")
         types = known[key]
         types = types if isinstance(types, tuple) else (types,)
         if float in types:
             types = (*types, int)
         if not isinstance(value, types) or (isinstance(value, bool) and bool not in types):
-            raise UsageError(f"{path}: option {key!r} has the wrong type "
+            raise UsageError(f"{where}: option {key!r} has the wrong type "
                              f"({type(value).__name__})")
-    return dict(config)
+    return dict(options)
 
 
 @contextlib.contextmanager
-def _progress(total: int, *, quiet: bool, what: str = "morphing"):
+def _progress(total: int, *, quiet: bool, what: str = "morphing", unit: str = "step"):
     """A rich progress bar on a terminal; nothing when quiet or not on a terminal."""
     if quiet or not sys.stderr.isatty():
         yield None
@@ -532,7 +676,7 @@ def _progress(total: int, *, quiet: bool, what: str = "morphing"):
         task = bar.add_task(what, total=total)
 
         def update(step, distance):
-            bar.update(task, completed=step, description=f"{what}: step {step}" + (
+            bar.update(task, completed=step, description=f"{what}: {unit} {step}" + (
                 "" if distance is None else f", mean distance {distance:.3g}"))
 
         yield update

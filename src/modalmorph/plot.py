@@ -25,6 +25,7 @@ import numpy as np
 __all__ = [
     "animate",
     "animate_track",
+    "plot_batch",
     "plot_energy",
     "plot_matches",
     "plot_shapes",
@@ -425,6 +426,40 @@ def plot_energy(morph, *, ax=None):
     reason = textwrap.fill(getattr(morph, "stop_reason", "") or status, 70)
     _legend_above(ax, [e_line, d_line], [e_line.get_label(), d_line.get_label()],
                   title=reason, title_fontsize="small")
+    return ax
+
+
+def plot_batch(results, *, ax=None):
+    """One point per completed item of a batch: final distance against strain energy.
+
+    Parameters
+    ----------
+    results : sequence of ItemResult
+        The rows of :func:`modalmorph.batch.run` (``Batch.results``); items without
+        numbers (failed, interrupted) are counted in the title.
+    ax : matplotlib Axes, optional
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
+    if ax is None:
+        ax = _new_axes(2, figsize=(6.4, 4.4))
+    done = [r for r in results if r.distance is not None and r.energy is not None]
+    for kind, color in (("pair", "#1f4e99"), ("sequence", "#d95f02")):
+        for converged, marker in ((True, "o"), (False, "x")):
+            rows = [r for r in done if r.kind == kind and bool(r.converged) == converged]
+            if rows:
+                ax.scatter([r.distance for r in rows], [r.energy for r in rows], s=18,
+                           color=color, marker=marker, label=f"{kind}s, " + (
+                               "converged" if converged else "not converged"))
+    ax.set(xlabel="final distance to target", ylabel="strain energy",
+           title=f"{len(done)} of {len(results)} items done"
+                 + (f", {len(results) - len(done)} failed or not run"
+                    if len(done) < len(results) else ""))
+    ax.grid(True, alpha=0.3)
+    if done:
+        ax.legend(fontsize="small")
     return ax
 
 
