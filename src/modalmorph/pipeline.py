@@ -352,7 +352,7 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
 
     size = reduced.size
     tol_n = (tol_distance / size) if tol_distance is not None else tol * tgt.size / size
-    shapes, loads, energy, e_node, mean_dist, near = [], [], [], [], [], []
+    shapes, forces, energy, e_node, mean_dist, near = [], [], [], [], [], []
     two_way = bool(work.ordered and tgt.ordered)
     pulled = loads_rule.pairs  # the pairs the springs (19) pull together
     if two_way:  # what an m-node shape spread evenly along the target leaves off it
@@ -369,7 +369,7 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
 
     def record(x, current, targets):
         shapes.append(reduced.to_user(current))
-        loads.append(k * (targets - current) * size)  # (19)-(20), user length units x k
+        forces.append(k * (targets - current) * size)  # (19)-(20), user length units x k
         energy.append(float(x @ K_el @ x) / k_ref)  # (22), U^T K U = x^T (Phi^T K Phi) x
         e = node_energy(md.shapes @ x, MPhi @ (K_el @ x), d) / k_ref  # (25), model nodes
         e_node.append(e if spread is None else spread @ e)
@@ -441,7 +441,7 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
                   tol=tol, tol_distance=tol_distance,
                   max_steps=max_steps, equilibrium_tol=equilibrium_tol,
                   unmatched=unmatched, neighbours=neighbours)
-    return Morph(shapes=np.array(shapes), loads=np.array(loads), energy=np.array(energy),
+    return Morph(shapes=np.array(shapes), loads=np.array(forces), energy=np.array(energy),
                  node_energy=np.array(e_node), mean_distance=np.array(mean_dist) * size,
                  matching=matching, similarity=similarity, converged=converged,
                  stop_reason=stop, source=src, target=tgt, params=params,
