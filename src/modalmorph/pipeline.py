@@ -360,9 +360,11 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
                       .mean())
         to_target = Polyline(Y, tgt.closed)
 
-    def distance(current, near, lazy=True):  # the stop test's measure, normalised units:
-        if not two_way or lazy and near > tol_n:  # at least near, so the curves are only
-            return near  # measured once near is below the tolerance
+    def distance(current, near, lazy=True):
+        """The stop test's measure (normalised units). It is at least ``near``, so with
+        ``lazy`` the curves are measured only once ``near`` is within the tolerance."""
+        if not two_way or lazy and near > tol_n:
+            return near
         d_ab = to_target.distance(current)
         d_ba = Polyline(current, work.closed).distance(Y)
         return max(near, float(d_ab.mean()), float(d_ba.mean()) - floor)
