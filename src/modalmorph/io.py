@@ -924,7 +924,11 @@ def _alive(pid: int) -> bool:
         return False
     except (PermissionError, OverflowError):  # another user's process; not a PID
         return True
-    return True
+    try:  # a killed process not yet reaped by its parent (a zombie) is dead too
+        with open(f"/proc/{pid}/stat", encoding="ascii", errors="replace") as fh:
+            return fh.read().rsplit(")", 1)[-1].split()[0] != "Z"
+    except OSError:  # no /proc (macOS): trust kill(0)
+        return True
 
 
 def _temp_sibling(folder: Path, name: str) -> Path:
