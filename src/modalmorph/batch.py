@@ -292,7 +292,7 @@ def run_item(item: Item, out, *, options: dict | None = None, figures: str = "no
     start = time.perf_counter()
     try:
         shutil.rmtree(staging, ignore_errors=True)  # left by a killed run
-        staging.mkdir()  # the writer's own temporary folder then lives inside it too
+        staging.mkdir(parents=True)  # the writer's temporary folder then lives inside it
         _compute(item, staging / item.id, {**(options or {}), **item.options}, figures)
         _publish(staging / item.id, final)
         return _row(item, final, "ok", seconds=time.perf_counter() - start)
