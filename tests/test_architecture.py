@@ -8,7 +8,8 @@
   takes more than ``MAX_PARAMS`` parameters (``self``/``cls`` not counted), except the
   public entry points that take an options object (a parameter named ``options`` and a
   ``**overrides``/``**kwargs``) for the parameter count;
-- every citation ``method.md §N`` in the source names a section of docs/method.md.
+- every citation ``method.md §N`` in the package, the tests, benchmarks, examples and the
+  README names a section of docs/method.md.
 
 Nothing is imported from the package: these tests read files only.
 """
@@ -261,9 +262,11 @@ def _sections() -> set[str]:
 def test_method_md_citations_exist():
     sections = _sections()
     assert sections, f"{METHOD} has no numbered sections (headings like '## 1. Title')"
+    citing = [*MODULES.values(), ROOT / "README.md",
+              *(p for d in ("tests", "benchmarks", "examples") for p in (ROOT / d).rglob("*.py"))]
     missing = [f"{path.relative_to(ROOT)}:{text[:m.start()].count(chr(10)) + 1} cites "
                f"method.md §{m.group(1)}"
-               for path in MODULES.values() for text in [path.read_text()]
+               for path in citing if path.exists() for text in [path.read_text()]
                for m in _CITATION.finditer(text) if m.group(1) not in sections]
     if missing:
         pytest.fail(f"citations of sections that docs/method.md does not have (it has "
@@ -280,3 +283,7 @@ def test_the_checks_see_the_package():
                    "    return x\n").body[0]
     assert _body_lines(fn) == 2 and _options_entry_point("f", fn)
     assert _parameters(fn, False) == ["a", "b", "options", "*overrides"]
+    rel = ast.parse("from .modes import _x\nfrom .. import y\n").body
+    assert _base(f"{PACKAGE}.element", rel[0]) == f"{PACKAGE}.modes"
+    assert _base(PACKAGE, rel[0]) == f"{PACKAGE}.modes"  # a package's level 1 is itself
+    assert _base(f"{PACKAGE}.solvers.dense", rel[1]) == PACKAGE
