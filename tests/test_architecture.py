@@ -48,7 +48,7 @@ TREES = {name: ast.parse(path.read_text(), filename=str(path)) for name, path in
 
 
 def _is_package(name: str) -> bool:
-    return MODULES[name].name == "__init__.py"
+    return name in MODULES and MODULES[name].name == "__init__.py"
 
 
 def _base(module: str, node: ast.ImportFrom) -> str | None:
