@@ -104,7 +104,8 @@ def test_plot_matches_on_bare_arrays_and_given_axes():
     fig, ax = plt.subplots()
     out = plot_matches(morph.shapes[0], morph.target.points, morph.matching.pairs, ax=ax)
     assert out is ax
-    assert ax.get_xlabel() == "x" and ax.get_ylabel() == "y"
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("x (input units)", "y (input units)")
+    assert ax.get_ylim()[0] < ax.get_ylim()[1]  # plain coordinates: y up
 
 
 def test_plot_matches_rejects_bad_pairs():
@@ -128,7 +129,7 @@ def test_plot_shapes_has_a_labelled_colour_bar(morph, color_by, label):
     assert label in cbar_axes[0].get_ylabel()
     if not is_3d(ax):
         assert ax.get_aspect() == 1.0  # equal aspect
-        assert (ax.get_xlabel(), ax.get_ylabel()) == ("x", "y")
+        assert (ax.get_xlabel(), ax.get_ylabel()) == ("x (input units)", "y (input units)")
     legend = [t.get_text() for t in ax.get_legend().get_texts()]
     assert legend[0].startswith("source") and legend[-1] == "target"
 
@@ -212,16 +213,13 @@ def test_animate_rejects_unknown_formats_and_mp4_without_ffmpeg(tmp_path, monkey
 
 
 def test_animate_leaves_no_partial_file_on_failure(tmp_path, monkeypatch):
-    from matplotlib import animation
+    save = Image.Image.save
 
-    grab = animation.PillowWriter.grab_frame
+    def fail_after_writing_some(self, fp, *args, **kwargs):
+        save(self, fp, *args, **{**kwargs, "append_images": []})  # a truncated file
+        raise RuntimeError("disk full")
 
-    def fail_after_first_frame(self, **kwargs):
-        if self._frames:  # one frame grabbed: finish() will write a truncated file
-            raise RuntimeError("disk full")
-        grab(self, **kwargs)
-
-    monkeypatch.setattr(animation.PillowWriter, "grab_frame", fail_after_first_frame)
+    monkeypatch.setattr(Image.Image, "save", fail_after_writing_some)
     with pytest.raises(RuntimeError, match="disk full"):
         animate(circle_to_ellipse(steps=3), tmp_path / "morph.gif", dpi=30)
     assert list(tmp_path.iterdir()) == []

@@ -674,7 +674,7 @@ def _choose_object(mask: np.ndarray, choice, name: str) -> np.ndarray:
         pick = int(np.argmin(ndimage.minimum(centre, labels, index)))
         why = "nearest the image centre"
     elif isinstance(choice, str):
-        pick, why = _largest_object(area, border)
+        pick, why = _largest_object(area, border, name)
     elif choice > count:
         raise ValueError(f"{name}: object={choice}, but the image has {count} object(s) "
                          f"(numbered 1..{count} in reading order)")
@@ -686,7 +686,7 @@ def _choose_object(mask: np.ndarray, choice, name: str) -> np.ndarray:
     return labels == pick + 1
 
 
-def _largest_object(area: np.ndarray, border: np.ndarray) -> tuple[int, str]:
+def _largest_object(area: np.ndarray, border: np.ndarray, name: str) -> tuple[int, str]:
     """Index of the largest object, preferring one inside the image (see
     :data:`INSIDE_FRACTION`), and why it was chosen."""
     largest = int(np.argmax(area))
@@ -695,9 +695,9 @@ def _largest_object(area: np.ndarray, border: np.ndarray) -> tuple[int, str]:
         return largest, "the largest"
     best = int(inside[np.argmax(area[inside])])
     if area[best] >= INSIDE_FRACTION * area[largest]:
-        _log.warning("object %d touches the image border and is larger (%d px) than "
+        _log.warning("%s: object %d touches the image border and is larger (%d px) than "
                      "object %d (%d px) inside the image: taking the one inside; "
-                     "object=%d takes the other", largest + 1, area[largest], best + 1,
+                     "object=%d takes the other", name, largest + 1, area[largest], best + 1,
                      area[best], largest + 1)
         return best, "the largest not touching the border"
     return largest, (f"the largest, though it touches the border: the largest object "
