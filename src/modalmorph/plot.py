@@ -56,7 +56,7 @@ TARGET_COLOR = "#d81b60"  # a strong magenta-red, absent from the colour maps be
 MATCH_COLOR = "0.55"
 SHAPE_COLOR = "#1f4e99"  # the moving shape when not coloured by a quantity
 _LABELS = {
-    "load": "load magnitude $\\|R_i\\|$ ({unit})",
+    "load": "load magnitude $\\|R_i\\|$ (k x {unit})",
     "energy": "strain energy per node $e_i$ ($k_{{ref}} L^2$)",
     None: "step",
 }
@@ -379,9 +379,8 @@ def frame_steps(morph, frames: str = "time", count: int | None = None) -> np.nda
 
 def _drawn_steps(n_steps: int, every: int, frames: str, morph) -> np.ndarray:
     """Every ``every``-th step and the last, or as many spaced along the path."""
-    if frames == "time":
-        return np.unique(np.r_[np.arange(0, n_steps, every), n_steps - 1])
-    return frame_steps(morph, "path", math.ceil(n_steps / every) + 1)
+    timed = np.unique(np.r_[np.arange(0, n_steps, every), n_steps - 1])
+    return timed if frames == "time" else frame_steps(morph, "path", len(timed))
 
 
 # ------------------------------------------------------------------------- figures
