@@ -688,8 +688,8 @@ def animate(morph, path, *, fps: int = 10, color_by="energy", dpi: int = GIF_DPI
     """Write an animation of the deformation.
 
     Each frame shows the shape at one step coloured per node (as :func:`plot_shapes`,
-    with one colour scale for all frames), the source and the target drawn faintly. The
-    fixed parts are drawn once; each frame draws only the moving shape over them.
+    one colour scale for all frames), the source and the target drawn faintly; the fixed
+    parts are drawn once, each frame only the moving shape over them.
 
     Parameters
     ----------
@@ -697,31 +697,22 @@ def animate(morph, path, *, fps: int = 10, color_by="energy", dpi: int = GIF_DPI
         A morph result.
     path : str or Path
         Output file: ``.gif`` (Pillow) or ``.mp4`` (needs ffmpeg on the PATH).
-    fps : int, optional
-        Frames per second.
+    fps, dpi : int, optional
+        Frames per second; resolution of the frames.
     color_by : {"energy", "load", None}, optional
         As in :func:`plot_shapes`; None draws every frame in one colour.
-    dpi : int, optional
-        Resolution of the frames.
     frames : {"time", "path"}, optional
-        Which steps make the frames (:func:`frame_steps`): evenly spaced in time, or along
-        the path (the damped motion makes most of its way in the first steps).
+        Steps shown (:func:`frame_steps`), at most ``max_frames``: evenly spaced in time,
+        or along the path (the damped motion makes most of its way in the first steps).
     background : bool, optional
         Draw the target's source image under the shapes (shapes read from an image).
-    max_frames : int, optional
-        At most this many frames (every step when there are fewer steps).
 
     Returns
     -------
     Path
         ``path``, written atomically (a temporary file renamed at the end, so a failure
-        leaves no partial file).
-
-    Raises
-    ------
-    ValueError
-        If the suffix is neither ``.gif`` nor ``.mp4``, or ``.mp4`` is asked for and no
-        ffmpeg is available.
+        leaves no partial file). A ValueError for a suffix other than ``.gif`` or
+        ``.mp4``, or ``.mp4`` without ffmpeg.
     """
     _check_color_by(color_by)
     _check_frames(frames)
@@ -742,21 +733,28 @@ def animate(morph, path, *, fps: int = 10, color_by="energy", dpi: int = GIF_DPI
     # a unique name beside the target, same suffix (ffmpeg picks its format from it)
     tmp = path.with_name(f".{path.stem}.{os.getpid()}-{secrets.token_hex(4)}.tmp{suffix}")
     try:
-        if suffix == ".gif":
-            images = _gif_frames(scene, steps)
-            images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:],
-                           duration=round(1000 / fps), loop=0)
-        else:
-            writer = animation.FFMpegWriter(fps=fps)
-            with writer.saving(scene.fig, tmp, dpi=dpi):
-                for j in steps:
-                    scene.show(j)
-                    writer.grab_frame()
+        _write_animation(scene, steps, tmp, fps=fps, dpi=dpi)
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+def _write_animation(scene, steps, path: Path, *, fps: int, dpi: int) -> None:
+    """Write the frames of ``steps``: a GIF with Pillow, an MP4 with ffmpeg."""
+    if path.suffix.lower() == ".gif":
+        images = _gif_frames(scene, steps)
+        images[0].save(path, format="GIF", save_all=True, append_images=images[1:],
+                       duration=round(1000 / fps), loop=0)
+        return
+    from matplotlib import animation
+
+    writer = animation.FFMpegWriter(fps=fps)
+    with writer.saving(scene.fig, path, dpi=dpi):
+        for j in steps:
+            scene.show(j)
+            writer.grab_frame()
 
 
 def _gif_frames(scene, steps) -> list:
@@ -1076,7 +1074,11 @@ def plot_trajectories(track, *, every: int = 1, background: bool = True, ax=None
                                                zorder=3))
         ax.scatter(*pts.T, s=6, c=color, linewidths=0, zorder=4, label=f"frame {f}")
     ax.legend(loc="best", fontsize="small")
-    ax.figure.colorbar(lines, ax=ax, label="frame", shrink=0.8)
+    from matplotlib.ticker import MaxNLocator
+
+    cbar = ax.figure.colorbar(lines, ax=ax, label="frame", shrink=0.8)
+    cbar.locator = MaxNLocator(integer=True)
+    cbar.update_ticks()
     _finish(ax, points.reshape(-1, dim), view, image=image)
     return ax
 
@@ -1101,7 +1103,7 @@ def plot_track_curves(track, *, ax=None):
     right = ax.twinx()
     right.plot(frames, track.cumulative_energy, color=TARGET_COLOR, ls="--", lw=1.5,
                label="cumulative energy")
-    right.set_ylabel("cumulative strain energy (22)", color=TARGET_COLOR)
+    right.set_ylabel(f"cumulative strain energy (22) ({ENERGY_UNIT})", color=TARGET_COLOR)
     handles = ax.get_legend_handles_labels()
     more = right.get_legend_handles_labels()
     ax.legend(handles[0] + more[0], handles[1] + more[1], fontsize="small", ncols=3,
