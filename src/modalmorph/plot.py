@@ -219,12 +219,15 @@ class _View:
     size: tuple | None = None
 
 
-def _view(*shapes, background: bool = True) -> _View:
-    """The view of the first shape with an ImageFrame (the target's, for a morph)."""
-    frame = next((s.frame for s in shapes if getattr(s, "frame", None) is not None), None)
+def _view(target, source=None, *, background: bool = True) -> _View:
+    """The view of the target's ImageFrame, else of the source's; the image drawn is the
+    target's only (the shapes are drawn in the target's coordinates)."""
+    frame = getattr(target, "frame", None)
+    own = frame is not None
+    frame = frame if own else getattr(source, "frame", None)
     if frame is None:
         return _View()
-    image = frame.image if background and frame.size is not None else None
+    image = frame.image if background and own and frame.size is not None else None
     return _View(unit=frame.unit, y_down=frame.y_down, image=image, size=frame.size)
 
 
@@ -628,7 +631,7 @@ def plot_energy(morph, *, ax=None):
     twin = ax.twinx()
     (d_line,) = twin.plot(steps, distance, color="#d95f02", ls="--", marker=marker, ms=4,
                           mfc="white", label="mean distance to target")
-    twin.set_ylabel(f"mean distance to target ({_view(morph.target).unit})")
+    twin.set_ylabel(f"mean distance to target ({_view(morph.target, morph.source).unit})")
     twin.set_ylim(bottom=0.0)
     import textwrap
 
