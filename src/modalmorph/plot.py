@@ -359,7 +359,8 @@ def frame_steps(morph, frames: str = "time", count: int | None = None) -> np.nda
         the cumulative mean node displacement: the damped dynamics make most of the way
         in the first steps, which evenly spaced steps show as a jump then a crawl.
     count : int, optional
-        Steps wanted, at most (fewer where several fall on one step). Default: all.
+        Steps wanted, at most (along the path, fewer where several fall on one step).
+        Default, or ``count`` >= the steps: all of them.
 
     Returns
     -------
@@ -369,7 +370,9 @@ def frame_steps(morph, frames: str = "time", count: int | None = None) -> np.nda
     shapes = np.asarray(morph.shapes, dtype=np.float64)
     n = shapes.shape[0]
     count = n if count is None else max(2, min(int(count), n))
-    if frames == "time" or n < 3:
+    if count == n:
+        return np.arange(n)
+    if frames == "time":
         return np.unique(np.rint(np.linspace(0, n - 1, count)).astype(np.intp))
     moved = np.linalg.norm(np.diff(shapes, axis=0), axis=2).mean(axis=1)
     path = np.r_[0.0, np.cumsum(moved)]
