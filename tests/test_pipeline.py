@@ -163,17 +163,17 @@ def test_3d_point_sets(rng):
 @pytest.mark.parametrize(
     "kwargs, match",
     [
-        ({"k": 0}, "k must be a positive"),
-        ({"dt": -1}, "dt must be a positive"),
+        ({"k": 0}, r"k must be a number in \[1e-06, 1e\+06\]"),
+        ({"dt": -1}, r"dt must be a number in \[1e-06, 1e\+06\]"),
         ({"alpha": 0.1, "delta": 0.5}, "not unconditionally stable"),
         ({"delta": 0.4}, "not unconditionally stable"),
         ({"scheme": "magic"}, "scheme must be"),
-        ({"modes": 1.5}, r"fraction must be in \(0, 1\]"),
+        ({"modes": 1.5}, r"modes must be None \(all\), a count >= 1 or a fraction in \(0, 1\]"),
         ({"modes": 10_000}, "modes must be None, a count between 1 and 200"),
         ({"matching": np.zeros((0, 2), int)}, "no node is matched"),
         ({"matching": np.array([[0, 500]])}, "out of range"),
         ({"damping": (0.1, -0.1)}, "damping must be a ratio"),
-        ({"max_steps": 0}, "max_steps must be a positive integer"),
+        ({"max_steps": 0}, "max_steps must be an integer >= 1"),
         ({"unmatched": "nearest"}, "unmatched must be one of"),
     ],
 )
