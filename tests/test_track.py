@@ -92,7 +92,7 @@ def test_errors_name_the_frame(hearts):
         track([ed, ed[:2]])
     with pytest.raises(ValueError, match="at least 2"):
         track([ed])
-    with pytest.raises(ValueError, match="unknown option"):
+    with pytest.raises(ValueError, match="morph_options: unknown MorphOptions option 'kk'"):
         track([ed, ed], morph_options={"kk": 1})
     with pytest.raises(ValueError, match="reference"):
         track([ed, ed], reference="last")
