@@ -150,9 +150,11 @@ class Simulation:
         Why the stop test stopped (``"tolerance"``, ``"equilibrium"``, ``"max_steps"``);
         None while running.
     model : FEModel
-        The physical model (of the source, or of a coarser copy of it).
-    n_modes : int
-        Modes superposed.
+        The physical model, of ``reduced``: the source, or a coarser copy of it.
+    modes : Modes
+        The ``n_modes`` modes superposed.
+    k_ref : float
+        The stiffness of one node, the unit of ``k`` and of the energies.
     """
 
     def __init__(self, source: Shape, target: Shape, pairs, options: MorphOptions | None = None):
