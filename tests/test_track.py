@@ -96,6 +96,8 @@ def test_errors_name_the_frame(hearts):
         track([ed, ed], morph_options={"kk": 1})
     with pytest.raises(ValueError, match="reference"):
         track([ed, ed], reference="last")
+    with pytest.raises(ValueError, match="unknown track option 'refrence'"):
+        track([ed, ed], refrence="first")
     with pytest.raises(ValueError, match="start_node"):
         track([ed, ed], start_node=60)
     with pytest.raises(ValueError, match="correspondence='modal'"):
@@ -212,12 +214,12 @@ def test_real_cycle_ed_es_ed(hearts):
 
 
 def test_options_objects_same_as_dicts(hearts):
-    from modalmorph import MatchOptions, MorphOptions
+    from modalmorph import MatchOptions, MorphOptions, TrackOptions
 
     frames = [resample(hearts[0], 50), resample(hearts[1], 60), resample(hearts[0], 55)]
     by_dict = track(frames, correspondence="modal", match_options={"method": "global"},
                     morph_options={"k": 60, "max_steps": 20})
-    by_object = track(frames, correspondence="modal",
+    by_object = track(frames, options=TrackOptions(correspondence="modal"),
                       match_options=MatchOptions(method="global"),
                       morph_options=MorphOptions(k=60, max_steps=20))
     np.testing.assert_array_equal(by_object.points, by_dict.points)  # bitwise

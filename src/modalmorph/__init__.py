@@ -18,7 +18,7 @@ from .options import MatchOptions, MorphOptions
 from .pipeline import Morph, morph
 from .shape import Shape, resample
 from .simulation import Simulation
-from .track import Track, track
+from .track import Track, TrackOptions, track
 
 __all__ = [
     "DEFAULT_SIGMA",
@@ -37,6 +37,7 @@ __all__ = [
     "Similarity",
     "Simulation",
     "Track",
+    "TrackOptions",
     "UNIT",
     "__version__",
     "align",

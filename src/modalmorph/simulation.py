@@ -129,8 +129,8 @@ class Simulation:
 
     Lagrange's dynamic equilibrium ``M U'' + C U' + K U = R`` (9) of the source's model,
     loaded by springs towards the target (19)-(20), integrated by mode superposition
-    (11)-(13) and Newmark's method (14)-(15). Everything below runs in the model's
-    normalised frame (the source's centroid and RMS radius).
+    (11)-(13) and Newmark's method (14)-(15) (method.md §4). Everything below runs in the
+    model's normalised frame (the source's centroid and RMS radius).
 
     Parameters
     ----------
@@ -313,7 +313,8 @@ class Simulation:
     def stop_test(self) -> str | None:
         """Whether to stop after the latest step, and why: ``"tolerance"`` (converged),
         ``"equilibrium"`` (no node moved visibly, or the distance gained less than 0.1 %
-        over 5 steps) or ``"max_steps"``; None to go on. Sets :attr:`reason`."""
+        over 5 steps) or ``"max_steps"``; None to go on (method.md §5). Sets
+        :attr:`reason`."""
         o, near = self.options, self._near
         self._dist = self._distance(near[-1])
         if self._dist <= self._tol_n:

@@ -13,8 +13,9 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields, replace
 from functools import partial
+from numbers import Integral
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -26,7 +27,8 @@ from .pipeline import Morph, morph
 from .quality import curve_distances, self_crossings
 from .shape import Shape, as_shape
 
-__all__ = ["REFERENCES", "CORRESPONDENCES", "Track", "track", "curve_distance"]
+__all__ = ["REFERENCES", "CORRESPONDENCES", "Track", "TrackOptions", "track",
+           "curve_distance"]
 
 log = logging.getLogger(__name__)
 
@@ -115,11 +117,48 @@ class Track:
         return self.frames[0].with_points(self.points[f])
 
 
-def track(frames, *, reference: str = "previous", correspondence: str = "nearest",
-          cycle: bool = False, segments: int = 6, start_node: int = 0,
+@dataclass(frozen=True)
+class TrackOptions:
+    """How :func:`track` follows a sequence; validated on construction.
+
+    Attributes
+    ----------
+    reference : {"previous", "first"}
+        Morph from the tracked previous frame (small steps), or from frame 0 every time.
+    correspondence : {"nearest", "modal"}
+        ``"nearest"``: in the common frame, each observed node pulls at most one node, the
+        nearest of those whose nearest it is; the others follow the morph's rule for
+        unmatched nodes (consecutive frames, motions under the node spacing).
+        ``"modal"``: :func:`modalmorph.match` (large motions between frames).
+    cycle : bool
+        Also morph the last frame back onto frame 0 (periodic sequences; ``closure``).
+    segments, start_node : int
+        ``segment_strain`` over this many segments of equal arc length (6, those of a
+        left-ventricle short-axis slice), the first starting at node ``start_node``.
+    """
+
+    reference: str = "previous"
+    correspondence: str = "nearest"
+    cycle: bool = False
+    segments: int = 6
+    start_node: int = 0
+
+    def __post_init__(self):
+        if self.reference not in REFERENCES:
+            raise OptionError(f"reference must be one of {REFERENCES}, got {self.reference!r}")
+        if self.correspondence not in CORRESPONDENCES:
+            raise OptionError(f"correspondence must be one of {CORRESPONDENCES}, "
+                              f"got {self.correspondence!r}")
+        for name, low in (("segments", 1), ("start_node", 0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, Integral) or value < low:
+                raise OptionError(f"{name} must be an integer >= {low}, got {value!r}")
+
+
+def track(frames, *, options: TrackOptions | None = None,
           names: Sequence[str] | None = None, match_options: MatchOptions | dict | None = None,
           morph_options: MorphOptions | dict | None = None,
-          progress: Callable[[int, int], None] | None = None) -> Track:
+          progress: Callable[[int, int], None] | None = None, **overrides) -> Track:
     """Follow the nodes of frame 0 through a sequence of observed objects.
 
     Frame ``f`` is reached by morphing the tracked frame ``f - 1`` (or frame 0) onto the
@@ -131,25 +170,17 @@ def track(frames, *, reference: str = "previous", correspondence: str = "nearest
     frames : sequence of Shape or array_like (n_f, d)
         At least 2 objects in time order, all 2D or all 3D, in one common frame of
         reference (the images' coordinates); node counts may differ.
-    reference : {"previous", "first"}, optional
-        Morph from the tracked previous frame (small steps), or from frame 0 every time.
-    correspondence : {"nearest", "modal"}, optional
-        ``"nearest"``: in the common frame, each observed node pulls at most one node, the
-        nearest of those whose nearest it is; the others follow the morph's rule for
-        unmatched nodes (consecutive frames, motions under the node spacing).
-        ``"modal"``: :func:`modalmorph.match` with ``match_options`` (large motions).
-    cycle : bool, optional
-        Also morph the last frame back onto frame 0 (periodic sequences; ``closure``).
-    segments, start_node : int, optional
-        ``segment_strain`` over this many segments of equal arc length (6, those of a
-        left-ventricle short-axis slice), the first starting at node ``start_node``.
+    options : TrackOptions, optional
+        How the sequence is followed (reference, correspondence, cycle, segments).
     names : sequence of str, optional
         A name per frame for messages (default ``"frame <i>"``).
     match_options, morph_options : MatchOptions, MorphOptions or dict, optional
-        The matcher's (``"modal"`` only) and the morph's options; dicts of their fields
-        are converted (``morph_options`` may also hold ``remove_rigid``).
+        The matcher's (``correspondence="modal"`` only) and the morph's options; dicts of
+        their fields are converted (``morph_options`` may also hold ``remove_rigid``).
     progress : callable, optional
         Called after each frame as ``progress(frame, n_frames)``.
+    **overrides
+        :class:`TrackOptions` fields (``reference="first"``, ``cycle=True``, ...).
 
     Returns
     -------
@@ -160,21 +191,33 @@ def track(frames, *, reference: str = "previous", correspondence: str = "nearest
     ValueError
         Invalid options, or a frame that cannot be tracked (the message names it).
     """
-    _check_choices(reference, correspondence, segments)
-    match_opts = _match_options(match_options, correspondence)
+    opts = _track_options(options, overrides)
+    match_opts = _match_options(match_options, opts.correspondence)
     morph_opts = _morph_options(morph_options)
-    shapes, names = _frames(frames, names, start_node)
+    shapes, names = _frames(frames, names, opts.start_node)
     step = partial(_morph_frame, names=names, match_options=match_opts,
                    morph_options=morph_opts)
-    morphs = _follow(shapes, reference, step, progress)
+    morphs = _follow(shapes, opts.reference, step, progress)
     first = shapes[0]
     points = np.array([first.points, *[r.shapes[-1] for r in morphs]])
-    closure = step(first.with_points(points[-1]), first, 0) if cycle else None
-    params = dict(reference=reference, correspondence=correspondence, cycle=cycle,
-                  segments=segments if first.ordered else 0, start_node=int(start_node),
+    closure = step(first.with_points(points[-1]), first, 0) if opts.cycle else None
+    params = dict(asdict(opts), segments=opts.segments if first.ordered else 0,
+                  start_node=int(opts.start_node),
                   match_options={} if match_opts is None else match_opts.record(),
                   morph=morphs[0].params)
     return _result(shapes, names, points, morphs, closure, params)
+
+
+def _track_options(options, overrides: dict) -> TrackOptions:
+    if options is None:
+        options = TrackOptions()
+    elif not isinstance(options, TrackOptions):
+        raise OptionError(f"options must be a TrackOptions, got {type(options).__name__}")
+    known = [f.name for f in fields(TrackOptions)]
+    unknown = sorted(set(overrides) - set(known))
+    if unknown:
+        raise OptionError(f"unknown track option {unknown[0]!r}; known: {', '.join(known)}")
+    return replace(options, **overrides)
 
 
 def _follow(shapes, reference: str, step, progress) -> list:
@@ -202,17 +245,6 @@ def _morph_frame(source: Shape, target: Shape, f: int, *, names: tuple,
                      options=options)
     except (ValueError, MorphDivergedError) as exc:
         raise ValueError(f"frame {f} ({names[f]}): {exc}") from exc
-
-
-def _check_choices(reference, correspondence, segments) -> None:
-    if reference not in REFERENCES:
-        raise OptionError(f"reference must be one of {REFERENCES}, got {reference!r}")
-    if correspondence not in CORRESPONDENCES:
-        raise OptionError(f"correspondence must be one of {CORRESPONDENCES}, "
-                          f"got {correspondence!r}")
-    if isinstance(segments, bool) or not isinstance(segments, int | np.integer) \
-            or segments < 1:
-        raise OptionError(f"segments must be a positive integer, got {segments!r}")
 
 
 def _match_options(value, correspondence: str) -> MatchOptions | None:
@@ -260,8 +292,7 @@ def _frames(frames, names, start_node) -> tuple[list, tuple]:
                          f"got {len(names)}")
     shapes = [_frame(obj, f, names) for f, obj in enumerate(frames)]
     first = shapes[0]
-    if isinstance(start_node, bool) or not isinstance(start_node, int | np.integer) \
-            or not 0 <= start_node < first.m:
+    if start_node >= first.m:
         raise OptionError(f"start_node must be a node of frame 0 (0..{first.m - 1}), "
                           f"got {start_node!r}")
     for f, shape in enumerate(shapes):
