@@ -25,7 +25,7 @@ from .errors import MorphDivergedError, OptionError
 from .modes import rayleigh
 from .options import MatchOptions, MorphOptions, flat_fields
 from .quality import Polyline
-from .shape import Shape, coarsen, resample
+from .shape import Shape, as_shape, coarsen, resample
 
 __all__ = ["Simulation", "Morph", "check_pairs", "SPARSE_MODES"]
 
@@ -134,7 +134,7 @@ class Simulation:
 
     Parameters
     ----------
-    source, target : Shape
+    source, target : Shape or array_like (m, d) and (n, d)
         The object that deforms (already aligned, when the rigid part is removed) and the
         target, of one dimension.
     pairs : array_like of int, shape (K, 2)
@@ -158,8 +158,8 @@ class Simulation:
     """
 
     def __init__(self, source: Shape, target: Shape, pairs, options: MorphOptions | None = None):
-        self.source, self.target = source, target
-        self.pairs = check_pairs(pairs, source.m, target.m)
+        self.source, self.target = as_shape(source, "source"), as_shape(target, "target")
+        self.pairs = check_pairs(pairs, self.source.m, self.target.m)
         self.options = MorphOptions() if options is None else options
         self.steps = 0
         self.reason: str | None = None
