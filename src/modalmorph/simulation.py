@@ -209,6 +209,7 @@ class Simulation:
         self._loads = LoadTargets(self._X1, self._Y, self.pairs, ordered=bool(work.ordered),
                                   closed=work.closed, target_closed=tgt.closed,
                                   neighbours=o.neighbours, rule=o.unmatched)
+        self._pulled = self._loads.pairs  # the pairs the springs (19) pull together
 
     def _build_equations(self) -> None:
         """The modal stiffness, springs and damping, and the Newmark integrator."""
@@ -407,7 +408,7 @@ class Simulation:
                         self.source.dim) / k_ref  # (25), model nodes
         self._e_node.append(e if self._spread is None else self._spread @ e)
         self._mean_dist.append(_mean_distance(current, self._Y, self.pairs))
-        self._near.append(_mean_distance(current, self._Y, self._loads.pairs))
+        self._near.append(_mean_distance(current, self._Y, self._pulled))
 
     def _params(self, similarity, match_options: MatchOptions | None) -> dict:
         """Every option under its flat name, the model's resolved values included."""
