@@ -21,10 +21,10 @@ from numpy.testing import assert_allclose
 
 from modalmorph import morph
 from modalmorph.app import MAX_UPLOAD, make_server, morph_options, parse_options
-from modalmorph.options import flat_fields
-from modalmorph.runs import FORM_CLASSES
 from modalmorph.datasets import load_heart
+from modalmorph.options import flat_fields
 from modalmorph.report import result_payload, write_html
+from modalmorph.runs import FORM_CLASSES
 from modalmorph.shape import Shape
 
 # Coordinates travel as JSON doubles and SVG attributes (shortest round-trip text):

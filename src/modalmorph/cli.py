@@ -435,9 +435,8 @@ def _progress(total: int | None, *, quiet: bool, what: str = "morphing", unit: s
     if quiet or not sys.stderr.isatty():
         yield None
         return
-    from rich.progress import Progress
-
     from rich.console import Console
+    from rich.progress import Progress
 
     done = [0]
     with Progress(console=Console(stderr=True)) as bar:
