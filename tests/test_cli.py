@@ -77,7 +77,7 @@ def test_morph_options_and_config(hand_csvs, tmp_path):
 
 def test_morph_with_figures_gif_and_vtk(hand_csvs, tmp_path):
     out = tmp_path / "out"
-    assert _run("morph", *hand_csvs, "--out", out, "--vtk", "-q") == 0
+    assert _run("morph", *hand_csvs, "--out", out, "--vtk", "--svg", "-q") == 0
     for name in ("matches.png", "shapes_energy.svg", "energy.png", "morph.gif",
                  "vtk/morph.pvd"):
         assert (out / name).stat().st_size > 0, name
@@ -362,7 +362,7 @@ def test_mp4_without_ffmpeg_fails_before_any_computation(hand_csvs, tmp_path, ca
 
 def test_no_figures_alone_still_writes_the_animation(hand_csvs, tmp_path):
     out = tmp_path / "out"
-    assert _run("morph", *hand_csvs, "--out", out, "-q", "--no-figures") == 0
+    assert _run("morph", *hand_csvs, "--out", out, "-q", "--no-figures", "--svg") == 0
     assert sorted(p.name for p in out.iterdir()) == ["final_shape.csv", "morph.gif",
                                                      "result.json", "shapes.npz"]
 

@@ -257,7 +257,8 @@ def write_morph(result, folder: Path, settings: Settings, *, inputs=(), images=N
         frames = {} if output.frames == OutputOptions.frames else {"frames": output.frames}
         if output.figures:
             background = {} if output.background else {"background": False}
-            plot.save_figures(result, folder, **background, **frames)
+            plot.save_figures(result, folder, formats=("png", "svg") if output.svg else
+                              ("png",), **background, **frames)
         for wanted, name in ((output.gif, "morph.gif"), (output.mp4, "morph.mp4")):
             if wanted:
                 plot.animate(result, folder / name, **frames)
