@@ -373,3 +373,21 @@ def test_small_problems_compute_with_one_blas_thread():
     with runs.blas_threads(runs.ONE_THREAD_NODES):
         assert all(p["num_threads"] == 1 for p in threadpool_info()
                    if p["user_api"] == "blas")
+
+
+def test_track_json_records_the_frame_files_and_options(tmp_path):
+    import hashlib
+
+    h0, h3 = resample(load_hand(0), 60), resample(load_hand(3), 60)
+    (tmp_path / "seq").mkdir()
+    for i, t in enumerate((0.0, 0.5, 1.0)):
+        _csv(tmp_path / "seq" / f"f{i}.csv", (1 - t) * h0 + t * h3)
+    out = tmp_path / "out"
+    assert _run("track", tmp_path / "seq" / "*.csv", "--out", out, "--reference", "first",
+                "-q", *QUICK) in (0, 3)
+    data = json.loads((out / "track.json").read_text())
+    files = sorted((tmp_path / "seq").iterdir())
+    assert data["input_files"] == [{"path": str(p), "sha256": hashlib.sha256(
+        p.read_bytes()).hexdigest()} for p in files]
+    assert data["options"]["reference"] == "first" and data["options"]["k"] == 100.0
+    assert set(data["options"]) == {name for name, _, _ in flat_fields(runs.SEQUENCE_CLASSES)}

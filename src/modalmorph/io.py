@@ -1246,7 +1246,8 @@ def _csv_frames(path: Path, name: str, nodes):
                    for n, v in zip(names, values, strict=True)]
 
 
-def save_track(track, out_dir) -> None:
+def save_track(track, out_dir, *, options: dict | None = None,
+               input_files: list | None = None) -> None:
     """Write a :class:`modalmorph.Track` into ``out_dir``, one file at a time (wrap the
     call in :func:`atomic_output_dir` for all or nothing).
 
@@ -1257,6 +1258,8 @@ def save_track(track, out_dir) -> None:
         ``crossed`` (F,).
     ``track.json``
         ``modalmorph_version``, ``parameters``, ``inputs`` (frame names), ``nodes``,
+        ``input_files`` (each file's ``path`` and ``sha256``, when given), ``options``
+        (every option of the run by flat name, when given), ``nodes``,
         ``dim``, ``closure_error`` (or null) and ``frames``: per frame ``name``,
         ``observed_nodes``, ``steps``, ``converged``, ``energy``, ``cumulative_energy``,
         ``strain``, ``segment_strain``, ``distance``, ``crossed`` (frame 0: no morph,
@@ -1280,7 +1283,8 @@ def save_track(track, out_dir) -> None:
             "segment_strain": _finite_or_none(track.segment_strain[f]),
             "distance": float(track.distance[f]), "crossed": bool(track.crossed[f])})
     summary = {"modalmorph_version": __version__, "parameters": track.params,
-               "inputs": list(track.names), "nodes": int(track.points.shape[1]),
+               "inputs": list(track.names), "input_files": list(input_files or []),
+               "options": dict(options or {}), "nodes": int(track.points.shape[1]),
                "dim": int(track.points.shape[2]), "closure_error": track.closure_error,
                "frames": frames}
     text = json.dumps(summary, indent=2, default=_json_default, allow_nan=False)

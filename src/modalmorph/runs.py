@@ -12,6 +12,7 @@ alike (flat names: :func:`modalmorph.options.flat_fields`).
 from __future__ import annotations
 
 import contextlib
+import glob
 import hashlib
 import os
 from dataclasses import MISSING, dataclass, field, fields
@@ -35,9 +36,8 @@ from .track import CORRESPONDENCES, REFERENCES, track
 
 __all__ = ["AlignOptions", "SequenceOptions", "Settings", "ItemRun", "PAIR_CLASSES",
            "SEQUENCE_CLASSES", "BATCH_CLASSES", "FORM_CLASSES", "ONE_THREAD_NODES",
-           "blas_threads", "check_tools", "default_text",
-           "file_record", "read_pair", "compute_morph", "morph_files", "track_files",
-           "write_morph"]
+           "blas_threads", "check_tools", "default_text", "file_record", "input_records",
+           "read_pair", "compute_morph", "morph_files", "track_files", "write_morph"]
 
 # Up to this many nodes match + morph run faster on one BLAS thread than on two (hands
 # pairs, best of 5 on a 2-core machine: 250 nodes 0.12 s with one thread, 0.23 s with
@@ -195,6 +195,21 @@ def file_record(path) -> dict:
     return {"path": os.fspath(path.absolute()), "sha256": digest.hexdigest()}
 
 
+def input_records(inputs) -> list[dict]:
+    """:func:`file_record` of every file the inputs name: a file, each file of a folder,
+    each match of a glob pattern."""
+    records = []
+    for path in map(Path, [inputs] if isinstance(inputs, str | os.PathLike) else inputs):
+        if any(c in path.name for c in "*?["):
+            files = sorted(map(Path, glob.glob(os.fspath(path))))
+        elif path.is_dir():
+            files = sorted(p for p in path.iterdir() if p.is_file())
+        else:
+            files = [path]
+        records.extend(file_record(p) for p in files)
+    return records
+
+
 def read_pair(source_path, target_path, read: ReadOptions):
     """The two shapes of a pair, read with the same options."""
     kw = _read_kwargs(read)
@@ -239,7 +254,7 @@ def morph_files(source, target, out, settings: Settings | None = None, *,
     with atomic_output_dir(out) as folder:  # checks out before any work
         result = compute_morph(*read_pair(source, target, settings.read), settings,
                                progress=progress)
-        inputs = [file_record(source), file_record(target)]
+        inputs = input_records([source, target])
         written = write_morph(result, folder, settings, inputs=inputs,
                               images=(Path(source), Path(target)))
     return ItemRun(result=result, files=tuple(out / name for name in written))
@@ -292,11 +307,13 @@ def track_files(inputs, out, settings: Settings | None = None, *, progress=None)
                              nodes=settings.read.nodes)
         morph_kw = {**_morph_kwargs(settings.morph),
                     "remove_rigid": settings.align.remove_rigid}
-        result = track(frames.shapes, names=frames.names, **seq.record(),
-                       match_options=settings.match.record()
-                       if seq.correspondence == "modal" else None,
-                       morph_options=morph_kw, progress=progress)
-        save_track(result, tmp)
+        with blas_threads(max(shape.m for shape in frames.shapes)):
+            result = track(frames.shapes, names=frames.names, **seq.record(),
+                           match_options=settings.match.record()
+                           if seq.correspondence == "modal" else None,
+                           morph_options=morph_kw, progress=progress)
+        save_track(result, tmp, options=settings.record(SEQUENCE_CLASSES),
+                   input_files=input_records(inputs))
         _write_track_renderings(result, tmp, output)
         names = sorted(p.relative_to(tmp) for p in tmp.rglob("*") if p.is_file())
     return ItemRun(result=result, files=tuple(out / name for name in names))
