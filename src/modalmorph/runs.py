@@ -60,9 +60,9 @@ class _Checked:
                                   f"got {value!r}")
             if meta["kind"] in ("int", "bool"):
                 parse_value(f.name, meta["kind"], value)  # refuses a wrong type
-            if meta["kind"] == "int" and value < f.metadata.get("low", 0):
-                raise OptionError(f"{f.name} must be an integer >= {meta['low']}, "
-                                  f"got {value!r}")
+            low = meta.get("low", 0)
+            if meta["kind"] == "int" and value < low:
+                raise OptionError(f"{f.name} must be an integer >= {low}, got {value!r}")
 
     def record(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
