@@ -80,10 +80,10 @@ def morph_options() -> list[dict]:
         kind = "bool" if meta["kind"] == "bool" else "choice" if choices else "text"
         default = cls().record()[f.name]
         text = default_text(f)
-        summary = re.split(r"(?<=[.;:])\s", meta["help"], maxsplit=1)[0]
+        summary = re.split(r"(?<=\.)\s", meta["help"], maxsplit=1)[0]
         options.append(dict(name=name, group=meta["group"], kind=kind, default=default,
                             default_text=text, choices=choices, summary=summary,
-                            help=f"{meta['help']} (default: {text or 'none'})"))
+                            help=meta["help"]))
     return options
 
 

@@ -74,7 +74,7 @@ class AlignOptions(_Checked):
 
     remove_rigid: bool = field(default=False, metadata=_meta(
         "remove rotation, translation and scale first (Horn): morph only the non-rigid "
-        "part, in fewer steps", kind="bool", group="loads and time integration"))
+        "part, in fewer steps", kind="bool", group="alignment"))
 
 
 @dataclass(frozen=True)
@@ -100,10 +100,10 @@ class SequenceOptions(_Checked):
 
 
 # The option classes of each command, in the order of their flags and records.
-PAIR_CLASSES = (ReadOptions, MatchOptions, MorphOptions, AlignOptions, OutputOptions)
+PAIR_CLASSES = (ReadOptions, MatchOptions, AlignOptions, MorphOptions, OutputOptions)
 SEQUENCE_CLASSES = (*PAIR_CLASSES, SequenceOptions)
-BATCH_CLASSES = (ReadOptions, MatchOptions, MorphOptions, AlignOptions, SequenceOptions)
-FORM_CLASSES = (MatchOptions, MorphOptions, AlignOptions)
+BATCH_CLASSES = (ReadOptions, MatchOptions, AlignOptions, MorphOptions, SequenceOptions)
+FORM_CLASSES = (MatchOptions, AlignOptions, MorphOptions)
 _ATTRIBUTE = {ReadOptions: "read", MatchOptions: "match", MorphOptions: "morph",
               AlignOptions: "align", OutputOptions: "output", SequenceOptions: "sequence"}
 
