@@ -35,9 +35,13 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
+from . import plot
+from .datasets import load_hand, load_heart
+from .io import SUPPORTED_EXTENSIONS, read_shape, save_result
 from .options import flat_fields
-from .report import image_data, image_size, render_page, result_payload
+from .report import image_data, image_size, render_page, result_payload, write_html
 from .runs import FORM_CLASSES, Settings, compute_morph, default_text
+from .shape import Shape, resample
 
 __all__ = ["MAX_UPLOAD", "MAX_PIXELS", "make_server", "morph_options", "parse_options",
            "serve"]
@@ -106,9 +110,6 @@ def parse_options(values: dict) -> Settings:
 
 def _examples() -> dict:
     """The bundled pairs, as in ``modalmorph demo``."""
-    from .datasets import load_hand, load_heart
-    from .shape import Shape, resample
-
     return {
         "heart": ("heart: left ventricle, end-diastole -> end-systole",
                   lambda: (Shape(load_heart("diastole")), Shape(load_heart("systole")))),
@@ -173,10 +174,6 @@ class _Job:
         return path
 
     def _write(self, name: str) -> None:
-        from . import plot
-        from .io import save_result
-        from .report import write_html
-
         r, out = self.result, self.folder
         if name == "morph.json":
             (out / name).write_text(json.dumps(self.payload, allow_nan=False), "utf-8")
@@ -321,8 +318,6 @@ class _Handler(BaseHTTPRequestHandler):
                     "target": self._store(target, f"{name} target", None)})
 
     def _post_upload(self, rest, query):
-        from .io import SUPPORTED_EXTENSIONS, read_shape
-
         q = {k: v[0].strip() for k, v in query.items()}
         name = Path(q.get("name", "")).name
         suffix = Path(name).suffix.lower()

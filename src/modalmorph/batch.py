@@ -31,6 +31,7 @@ from pathlib import Path
 from .errors import OptionError
 from .io import atomic_write
 from .options import OutputOptions
+from .plot import plot_batch
 from .runs import BATCH_CLASSES, Settings, morph_files, track_files
 
 __all__ = ["FIGURES", "ENGINES", "Engine", "Item", "ItemResult", "Batch", "read_manifest",
@@ -581,8 +582,6 @@ def write_summary(results: Sequence[ItemResult], out, *, figure: bool = False) -
             pq.write_table(pa.Table.from_pylist(records, schema=schema), tmp)
     if figure:
         from matplotlib.figure import Figure
-
-        from .plot import plot_batch
 
         fig = Figure(figsize=(6.4, 4.4))  # no pyplot: no figure left open
         plot_batch(results, ax=fig.add_subplot())

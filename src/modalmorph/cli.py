@@ -20,8 +20,12 @@ from pathlib import Path
 
 from . import __version__, batch
 from .app import serve
+from .datasets import load_hand, load_heart
 from .errors import MorphDivergedError, OptionError
+from .io import atomic_output_dir, atomic_write
+from .matching import match
 from .options import MatchOptions, ReadOptions, flat_fields
+from .plot import plot_matches
 from .runs import (
     BATCH_CLASSES,
     PAIR_CLASSES,
@@ -35,6 +39,7 @@ from .runs import (
     track_files,
     write_morph,
 )
+from .shape import Shape, resample
 
 __all__ = ["main", "build_parser", "add_option_flags", "flag_help", "load_config",
            "EXIT_CODES"]
@@ -287,9 +292,6 @@ def _settings(args, classes) -> Settings:
 def _run_match(args) -> int:
     import numpy as np
 
-    from .io import atomic_write
-    from .matching import match
-
     settings = _settings(args, _MATCH_CLASSES)
     source, target = read_pair(args.source, args.target, settings.read)
     result = match(source, target, **settings.match.record())
@@ -302,8 +304,6 @@ def _run_match(args) -> int:
         with atomic_write(args.out) as tmp:
             np.savetxt(tmp, table, **kw)
     if args.plot is not None:
-        from .plot import plot_matches
-
         ax = plot_matches(source, target, result.pairs)
         with atomic_write(args.plot) as tmp:
             ax.figure.savefig(tmp, dpi=200, bbox_inches="tight")
@@ -376,10 +376,6 @@ def _run_batch(args) -> int:
 
 
 def _run_demo(args) -> int:
-    from .datasets import load_hand, load_heart
-    from .io import atomic_output_dir
-    from .shape import Shape, resample
-
     cases = {
         "heart": (Shape(load_heart("diastole")), Shape(load_heart("systole")),
                   "left ventricle, end-diastole -> end-systole (Sunnybrook, CC0)"),

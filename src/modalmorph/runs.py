@@ -18,6 +18,9 @@ import os
 from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
 
+from threadpoolctl import threadpool_limits
+
+from . import plot
 from .errors import OptionError, ShapeError
 from .io import atomic_output_dir, read_frames, read_shape, save_result, save_track
 from .matching import match
@@ -32,6 +35,7 @@ from .options import (
     split,
 )
 from .pipeline import morph
+from .report import input_images, write_html
 from .track import CORRESPONDENCES, REFERENCES, track
 
 __all__ = ["AlignOptions", "SequenceOptions", "Settings", "ItemRun", "PAIR_CLASSES",
@@ -267,8 +271,6 @@ def write_morph(result, folder: Path, settings: Settings, *, inputs=(), images=N
     save_result(result, folder, params=result.params, options=settings.record(PAIR_CLASSES),
                 inputs=list(inputs))
     if output.figures or output.gif or output.mp4:
-        from . import plot
-
         frames = {} if output.frames == OutputOptions.frames else {"frames": output.frames}
         if output.figures:
             background = {} if output.background else {"background": False}
@@ -278,12 +280,8 @@ def write_morph(result, folder: Path, settings: Settings, *, inputs=(), images=N
             if wanted:
                 plot.animate(result, folder / name, **frames)
     if output.vtk:
-        from .plot import write_vtk_series
-
-        write_vtk_series(result, folder / "vtk")
+        plot.write_vtk_series(result, folder / "vtk")
     if output.html:
-        from .report import input_images, write_html
-
         title = None if images is None else f"{images[0].name} → {images[1].name}"
         write_html(result, folder / "report.html", title=title,
                    images=input_images(*images) if images else None)
@@ -322,8 +320,6 @@ def track_files(inputs, out, settings: Settings | None = None, *, progress=None)
 def _write_track_renderings(result, folder: Path, output: OutputOptions) -> None:
     if not (output.figures or output.gif or output.mp4):
         return
-    from . import plot
-
     if output.figures:
         plot.save_track_figures(result, folder)
     for wanted, name in ((output.gif, "track.gif"), (output.mp4, "track.mp4")):
@@ -334,8 +330,6 @@ def _write_track_renderings(result, folder: Path, output: OutputOptions) -> None
 @contextlib.contextmanager
 def blas_threads(nodes: int):
     """Limit BLAS to one thread for shapes of up to :data:`ONE_THREAD_NODES` nodes."""
-    from threadpoolctl import threadpool_limits
-
     if nodes > ONE_THREAD_NODES:
         yield
         return
