@@ -124,7 +124,7 @@ def test_cli_on_corpus_files(corpus, tmp_path, capsys, monkeypatch, name):
     path = next(p for p in corpus if p.name == name)
     code = main(["morph", str(path), str(good), "--out", "X", "-q", "--no-gif"])
     err = capsys.readouterr().err.strip().splitlines()
-    assert code in (0, 2)
+    assert code in (0, 2, 3)  # 3: written, tolerance not reached
     if code == 2:
         assert len(err) == 1 and err[0].startswith("modalmorph: error: ")
         assert sorted(p.name for p in tmp_path.iterdir()) == ["good.csv"]
@@ -177,7 +177,7 @@ def test_killed_runs_leave_the_output_complete_or_absent(tmp_path):
     assert start(50, "X").wait(timeout=120) == 0
     whole = time.monotonic() - began
     ks, names = {50}, sorted(p.name for p in (tmp_path / "X").iterdir())
-    assert len(names) == 13  # result.json, shapes.npz, final_shape.csv, 5 figures x 2
+    assert len(names) == 8  # result.json, shapes.npz, final_shape.csv, 5 PNG figures
     # Seven moments spread over a whole run's time (start-up, reading, matching,
     # integrating, writing) and
     # three while the run is held before each step of its final move (the writer sleeps

@@ -646,13 +646,15 @@ def test_save_result(tmp_path, rng):
     morph = _fake_morph(rng)
     params = {"material": "rubber", "dt": np.float64(0.01), "steps": np.int64(4),
               "sigma": np.array([1.0, 2.0]), "source": tmp_path / "a.csv", "nothing": None}
-    save_result(morph, tmp_path / "out", params=params)
+    inputs = [{"path": "/data/a.csv", "sha256": "0" * 64}]
+    save_result(morph, tmp_path / "out", params=params, options={"k": 100.0}, inputs=inputs)
     out = tmp_path / "out"
     assert sorted(p.name for p in out.iterdir()) == ["final_shape.csv", "result.json",
                                                     "shapes.npz"]
     result = json.loads((out / "result.json").read_text())
     assert result == {
-        "modalmorph_version": modalmorph.__version__,
+        "modalmorph_version": modalmorph.__version__, "inputs": inputs,
+        "options": {"k": 100.0},
         "parameters": {"material": "rubber", "dt": 0.01, "steps": 4, "sigma": [1.0, 2.0],
                        "source": str(tmp_path / "a.csv"), "nothing": None},
         "converged": True, "stop_reason": "mean distance below tolerance", "steps": 4,

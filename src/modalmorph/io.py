@@ -89,6 +89,7 @@ __all__ = [
     "MAX_PARTIAL_ALPHA",
     "MIN_OBJECT_PIXELS",
     "OUTPUT_MARKER",
+    "OUTPUT_MARKERS",
     "READ_SECONDS",
     "SUPPORTED_EXTENSIONS",
     "SVG_FRAME",
@@ -97,6 +98,7 @@ __all__ = [
     "read_frames",
     "read_shape",
     "remove_leftovers",
+    "result_summary",
     "save_result",
     "save_track",
     "write_points",
@@ -891,73 +893,36 @@ def write_points(path, points) -> None:
             tmp.write_text(json.dumps(data) + "\n", encoding="utf-8")
 
 
-def save_result(morph, out_dir, *, params: dict) -> None:
+def save_result(morph, out_dir, *, params: dict, options: dict | None = None,
+                inputs: list | None = None) -> None:
     """Write a morph's result into ``out_dir`` (created if needed), one file at a time.
 
     Three files are written, each atomically (wrap the call in :func:`atomic_output_dir`
-    for all or nothing):
-
-    ``result.json``
-        A summary, with this schema::
-
-            {
-              "modalmorph_version": str,      # the library that wrote it
-              "parameters": {...},            # params, as given (made JSON-safe)
-              "converged": bool,              # the stopping criterion was met
-              "stop_reason": str,             # why the integration stopped
-              "steps": int,                   # T, the number of time steps taken
-              "matches": int,                 # K, the number of matched node pairs
-              "source_nodes": int,            # m
-              "target_nodes": int,            # n
-              "dim": int,                     # 2 or 3
-              "mean_distance": [float, ...],  # T + 1 values, per step (step 0 = source)
-              "energy": [float, ...]          # T + 1 values, strain energy per step
-            }
-
-        Non-finite numbers are written as ``null`` (strict JSON).
-
-    ``shapes.npz``
-        Arrays ``shapes`` (T+1, m, d), ``loads`` (T+1, m, d), ``node_energy`` (T+1, m),
-        ``energy`` (T+1,), ``mean_distance`` (T+1,) and ``pairs`` (K, 2), int: source and
-        target node indices of each match.
-
-    ``final_shape.csv``
-        The last intermediate shape, ``shapes[-1]``, with a header ``x,y[,z]``.
+    for all or nothing): ``result.json`` (the summary of :func:`result_summary`, strict
+    JSON: non-finite numbers as ``null``); ``shapes.npz``, arrays ``shapes`` (T+1, m, d),
+    ``loads`` (T+1, m, d), ``node_energy`` (T+1, m), ``energy`` (T+1,),
+    ``mean_distance`` (T+1,) and ``pairs`` (K, 2), int: source and target node indices of
+    each match; ``final_shape.csv``, the last shape ``shapes[-1]`` with a header
+    ``x,y[,z]``.
 
     Parameters
     ----------
-    morph : morph result
-        Has ``shapes``, ``loads``, ``energy``, ``node_energy``, ``mean_distance``,
-        ``matching.pairs``, ``converged``, ``stop_reason``, ``source``, ``target`` and
-        ``steps``.
+    morph : Morph
     out_dir : str or os.PathLike
     params : dict
-        The parameters of the run, stored in ``result.json``. Numpy scalars and arrays
-        and paths are converted; anything else not JSON-serialisable is an error.
+        The parameters the run used (``Morph.params``).
+    options : dict, optional
+        Every option of the run by flat name, as given (the command line's record).
+    inputs : list of dict, optional
+        The input files, ``{"path", "sha256"}`` each.
 
     Raises
     ------
     ValueError
-        If ``params`` holds a value that cannot be written as JSON.
+        If ``params`` or ``options`` hold a value that cannot be written as JSON.
     """
-    from . import __version__
-
     out_dir = Path(out_dir)
-    shapes = np.asarray(morph.shapes, dtype=np.float64)
-    pairs = np.asarray(morph.matching.pairs, dtype=np.intp).reshape(-1, 2)
-    summary = {
-        "modalmorph_version": __version__,
-        "parameters": params,
-        "converged": bool(morph.converged),
-        "stop_reason": str(morph.stop_reason),
-        "steps": int(morph.steps),
-        "matches": len(pairs),
-        "source_nodes": int(morph.source.m),
-        "target_nodes": int(morph.target.m),
-        "dim": int(morph.source.dim),
-        "mean_distance": _finite_or_none(morph.mean_distance),
-        "energy": _finite_or_none(morph.energy),
-    }
+    summary = result_summary(morph, params=params, options=options, inputs=inputs)
     try:
         text = json.dumps(summary, indent=2, default=_json_default, allow_nan=False)
     except (TypeError, ValueError) as exc:
@@ -965,13 +930,58 @@ def save_result(morph, out_dir, *, params: dict) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
     with atomic_write(out_dir / "result.json") as tmp:
         tmp.write_text(text + "\n", encoding="utf-8")
+    shapes = np.asarray(morph.shapes, dtype=np.float64)
     with atomic_write(out_dir / "shapes.npz") as tmp:
         np.savez_compressed(
             tmp, shapes=shapes, loads=np.asarray(morph.loads, dtype=np.float64),
             node_energy=np.asarray(morph.node_energy, dtype=np.float64),
             energy=np.asarray(morph.energy, dtype=np.float64),
-            mean_distance=np.asarray(morph.mean_distance, dtype=np.float64), pairs=pairs)
+            mean_distance=np.asarray(morph.mean_distance, dtype=np.float64),
+            pairs=_pairs_array(morph))
     write_points(out_dir / "final_shape.csv", shapes[-1])
+
+
+def result_summary(morph, *, params: dict, options: dict | None = None,
+                   inputs: list | None = None) -> dict:
+    """The content of ``result.json``::
+
+        {
+          "modalmorph_version": str,      # the library that wrote it
+          "inputs": [{"path", "sha256"}], # the input files (empty when not given)
+          "options": {...},               # every option as given, by flat name
+          "parameters": {...},            # what the run used (Morph.params)
+          "converged": bool,              # the stopping criterion was met
+          "stop_reason": str,             # why the integration stopped
+          "steps": int,                   # T, the number of time steps taken
+          "matches": int,                 # K, the number of matched node pairs
+          "source_nodes": int,            # m
+          "target_nodes": int,            # n
+          "dim": int,                     # 2 or 3
+          "mean_distance": [float, ...],  # T + 1 values, per step (step 0 = source)
+          "energy": [float, ...]          # T + 1 values, strain energy per step
+        }
+    """
+    from . import __version__
+
+    return {
+        "modalmorph_version": __version__,
+        "inputs": list(inputs or []),
+        "options": dict(options or {}),
+        "parameters": params,
+        "converged": bool(morph.converged),
+        "stop_reason": str(morph.stop_reason),
+        "steps": int(morph.steps),
+        "matches": len(_pairs_array(morph)),
+        "source_nodes": int(morph.source.m),
+        "target_nodes": int(morph.target.m),
+        "dim": int(morph.source.dim),
+        "mean_distance": _finite_or_none(morph.mean_distance),
+        "energy": _finite_or_none(morph.energy),
+    }
+
+
+def _pairs_array(morph) -> np.ndarray:
+    return np.asarray(morph.matching.pairs, dtype=np.intp).reshape(-1, 2)
 
 
 def _finite_or_none(values) -> list:
@@ -999,8 +1009,10 @@ def _json_default(obj):
 # one whose process is gone was left by a killed run and is removed by the next writer.
 _TMP_TAG = ".modalmorph-tmp-"
 _LEFTOVER = re.compile(r"^\..*\.modalmorph-tmp-(\d+)-[\w-]+$")
-# A folder that is replaced as a whole must be empty or hold this file (a previous result).
+# A folder that is replaced as a whole must be empty or hold one of these files (a previous
+# result of morph or of track).
 OUTPUT_MARKER = "result.json"
+OUTPUT_MARKERS = (OUTPUT_MARKER, "track.json")
 # Seconds to sleep just before the final rename(s): read only here, set only by the tests
 # that kill a run at that moment.
 _PAUSE_ENV = "MODALMORPH_TEST_RENAME_PAUSE"
@@ -1114,17 +1126,18 @@ def atomic_output_dir(final_dir):
     """Write a folder as a whole: yield a new temporary sibling folder to fill, then rename.
 
     On entry the destination is checked (a folder that exists must be empty or a previous
-    output, holding :data:`OUTPUT_MARKER`) and the temporary folder is created beside it:
-    an unwritable destination fails here, before any work. Temporary folders of killed
-    runs found there are removed (:func:`remove_leftovers`).
+    output, holding one of :data:`OUTPUT_MARKERS`) and the temporary folder is created
+    beside it: an unwritable destination fails here, before any work. Temporary folders of
+    killed runs found there are removed (:func:`remove_leftovers`).
 
     When the block ends normally, the temporary folder becomes ``final_dir`` by one rename;
     an existing ``final_dir`` is swapped with it in one step (``renameat2`` with
     ``RENAME_EXCHANGE`` on Linux) or, where that is not supported, renamed aside first.
     So at every instant ``final_dir`` is the old complete folder, the new complete folder
-    or (only in the fallback, between two renames) absent; the old one is deleted after.
-    Missing parent folders are created only then. When the block raises, the temporary
-    folder is deleted and ``final_dir`` is left as it was.
+    or (only in the fallback, between two renames) absent; the old one is deleted after,
+    with every file of the previous run. Missing parent folders are created only then.
+    When the block raises, the temporary folder is deleted and ``final_dir`` is left as
+    it was.
 
     Raises
     ------
@@ -1139,41 +1152,53 @@ def atomic_output_dir(final_dir):
     """
     name = os.fspath(final_dir)
     final = Path(os.path.abspath(final_dir))
+    tmp = _staging_folder(final, name)
+    try:
+        yield tmp
+        tmp = _put_in_place(tmp, final, name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _staging_folder(final: Path, name: str) -> Path:
+    """Check the destination and create the temporary folder that will replace it."""
     if final.is_symlink() or (final.exists() and not final.is_dir()):
         raise ValueError(f"{name}: exists and is not a folder")
-    if final.is_dir() and any(final.iterdir()) and not (final / OUTPUT_MARKER).is_file():
-        raise ValueError(f"{name}: a folder with other files in it (no {OUTPUT_MARKER}); the "
-                         f"output folder is replaced as a whole, so give a new or empty one")
+    if final.is_dir() and any(final.iterdir()) and not any(
+            (final / marker).is_file() for marker in OUTPUT_MARKERS):
+        raise ValueError(f"{name}: a folder with other files in it (no "
+                         f"{' or '.join(OUTPUT_MARKERS)}); the output folder is replaced "
+                         f"as a whole, so give a new or empty one")
     anchor = final.parent  # the nearest existing ancestor holds the temporary folder
     while not anchor.is_dir():
         if anchor.exists() or anchor.parent == anchor:
             raise ValueError(f"{name}: cannot create the folder: {anchor} is not a folder")
         anchor = anchor.parent
     try:
-        tmp = _temp_sibling(anchor, final.name or "out")
+        return _temp_sibling(anchor, final.name or "out")
     except OSError as exc:
         raise ValueError(f"{name}: cannot write the output folder: cannot create a folder in "
                          f"{anchor} ({exc.strerror})") from None
+
+
+def _put_in_place(tmp: Path, final: Path, name: str) -> Path:
+    """Rename the finished ``tmp`` to ``final``; returns what is left to delete."""
     try:
-        yield tmp
-        try:
-            final.parent.mkdir(parents=True, exist_ok=True)
-            _pause_for_tests()
-            if not final.is_dir():
-                os.rename(tmp, final)
-            elif _exchange(tmp, final):
-                pass  # tmp now holds the old folder, deleted below
-            else:
-                old = tmp.with_name(tmp.name + "-old")
-                os.rename(final, old)
-                _pause_for_tests()
-                os.rename(tmp, final)
-                tmp = old
-        except OSError as exc:
-            raise ValueError(f"{name}: cannot move the output folder into place "
-                             f"({exc.strerror})") from None
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        final.parent.mkdir(parents=True, exist_ok=True)
+        _pause_for_tests()
+        if not final.is_dir():
+            os.rename(tmp, final)
+            return tmp
+        if _exchange(tmp, final):
+            return tmp  # tmp now holds the old folder
+        old = tmp.with_name(tmp.name + "-old")
+        os.rename(final, old)
+        _pause_for_tests()
+        os.rename(tmp, final)
+        return old
+    except OSError as exc:
+        raise ValueError(f"{name}: cannot move the output folder into place "
+                         f"({exc.strerror})") from None
 
 
 # --------------------------------------------------------------------------------------
@@ -1346,7 +1371,8 @@ def _csv_frames(path: Path, name: str, nodes):
                    for n, v in zip(names, values, strict=True)]
 
 
-def save_track(track, out_dir) -> None:
+def save_track(track, out_dir, *, options: dict | None = None,
+               input_files: list | None = None) -> None:
     """Write a :class:`modalmorph.Track` into ``out_dir``, one file at a time (wrap the
     call in :func:`atomic_output_dir` for all or nothing).
 
@@ -1357,6 +1383,8 @@ def save_track(track, out_dir) -> None:
         ``crossed`` (F,).
     ``track.json``
         ``modalmorph_version``, ``parameters``, ``inputs`` (frame names), ``nodes``,
+        ``input_files`` (each file's ``path`` and ``sha256``, when given), ``options``
+        (every option of the run by flat name, when given), ``nodes``,
         ``dim``, ``closure_error`` (or null) and ``frames``: per frame ``name``,
         ``observed_nodes``, ``steps``, ``converged``, ``energy``, ``cumulative_energy``,
         ``strain``, ``segment_strain``, ``distance``, ``crossed`` (frame 0: no morph,
@@ -1380,7 +1408,8 @@ def save_track(track, out_dir) -> None:
             "segment_strain": _finite_or_none(track.segment_strain[f]),
             "distance": float(track.distance[f]), "crossed": bool(track.crossed[f])})
     summary = {"modalmorph_version": __version__, "parameters": track.params,
-               "inputs": list(track.names), "nodes": int(track.points.shape[1]),
+               "inputs": list(track.names), "input_files": list(input_files or []),
+               "options": dict(options or {}), "nodes": int(track.points.shape[1]),
                "dim": int(track.points.shape[2]), "closure_error": track.closure_error,
                "frames": frames}
     text = json.dumps(summary, indent=2, default=_json_default, allow_nan=False)

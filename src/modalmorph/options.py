@@ -276,7 +276,9 @@ class ReadOptions(_Options):
 class OutputOptions(_Options):
     """What the command line writes besides the results (``result.json``, the shapes)."""
 
-    figures: bool = _opt(True, "the PNG and SVG figures", group="outputs", kind="bool")
+    figures: bool = _opt(True, "the PNG figures", group="outputs", kind="bool")
+    svg: bool = _opt(False, "the figures also as SVG (vector graphics; costs as much again "
+                     "as the PNGs)", group="outputs", kind="bool")
     gif: bool = _opt(True, "the animation as a GIF", group="outputs", kind="bool")
     mp4: bool = _opt(False, "also the animation as an MP4 (needs ffmpeg)", group="outputs",
                      kind="bool")
