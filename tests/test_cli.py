@@ -12,7 +12,7 @@ from modalmorph import cli, runs
 from modalmorph.app import morph_options
 from modalmorph.cli import build_parser, main
 from modalmorph.datasets import load_hand
-from modalmorph.options import OPTION_CLASSES, flat_fields
+from modalmorph.options import OPTION_CLASSES, TrackOptions, flat_fields
 from modalmorph.shape import resample
 
 
@@ -275,7 +275,7 @@ def test_every_option_has_a_flag_a_config_key_a_form_entry_and_a_record(hand_csv
     every = runs.SEQUENCE_CLASSES
     assert set(OPTION_CLASSES) <= set(every)
     for name, cls, f in flat_fields(every):
-        command = "track" if cls is runs.SequenceOptions else "morph"
+        command = "track" if cls is TrackOptions else "morph"
         assert name in flags[command], name
         default = runs.default_text(f)  # as a config file or the form writes it
         settings = runs.Settings.from_flat({name: default} if default else {}, every)

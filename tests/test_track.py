@@ -96,7 +96,7 @@ def test_errors_name_the_frame(hearts):
         track([ed, ed], morph_options={"kk": 1})
     with pytest.raises(ValueError, match="reference"):
         track([ed, ed], reference="last")
-    with pytest.raises(ValueError, match="unknown track option 'refrence'"):
+    with pytest.raises(ValueError, match="unknown TrackOptions option 'refrence'"):
         track([ed, ed], refrence="first")
     with pytest.raises(ValueError, match="start_node"):
         track([ed, ed], start_node=60)

@@ -36,12 +36,11 @@ from urllib.parse import parse_qs, urlsplit
 import numpy as np
 
 from . import plot
-from .datasets import load_hand, load_heart
+from .datasets import hand_shape, heart_shape
 from .io import SUPPORTED_EXTENSIONS, read_shape, save_result
 from .options import flat_fields
 from .report import image_data, image_size, render_page, result_payload, write_html
 from .runs import FORM_CLASSES, Settings, compute_morph, default_text
-from .shape import Shape, resample
 
 __all__ = ["MAX_UPLOAD", "MAX_PIXELS", "make_server", "morph_options", "parse_options",
            "serve"]
@@ -112,10 +111,9 @@ def _examples() -> dict:
     """The bundled pairs, as in ``modalmorph demo``."""
     return {
         "heart": ("heart: left ventricle, end-diastole -> end-systole",
-                  lambda: (Shape(load_heart("diastole")), Shape(load_heart("systole")))),
+                  lambda: (heart_shape("diastole"), heart_shape("systole"))),
         "hands": ("hands: hand 0 (120 nodes) -> hand 3 (140 nodes)",
-                  lambda: (Shape(resample(load_hand(0), 120)),
-                           Shape(resample(load_hand(3), 140)))),
+                  lambda: (hand_shape(0, 120), hand_shape(3, 140))),
     }
 
 

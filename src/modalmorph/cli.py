@@ -2,8 +2,8 @@
 and ``app``.
 
 The option flags are generated from the fields of the option classes
-(:mod:`modalmorph.options`, :class:`modalmorph.runs.AlignOptions`,
-:class:`modalmorph.runs.SequenceOptions`): a flag per flat name, its help and default from
+(:mod:`modalmorph.options`, :class:`modalmorph.options.AlignOptions`,
+:class:`modalmorph.options.TrackOptions`): a flag per flat name, its help and default from
 the field, grouped by the field's group; a ``--config`` TOML file takes the same flat
 names, and the command line wins over it. What one run does is :mod:`modalmorph.runs`.
 """
@@ -20,7 +20,7 @@ from pathlib import Path
 
 from . import __version__, batch
 from .app import serve
-from .datasets import load_hand, load_heart
+from .datasets import hand_shape, heart_shape
 from .errors import MorphDivergedError, OptionError
 from .io import atomic_output_dir, atomic_write
 from .matching import match
@@ -39,7 +39,6 @@ from .runs import (
     track_files,
     write_morph,
 )
-from .shape import Shape, resample
 
 __all__ = ["main", "build_parser", "add_option_flags", "flag_help", "load_config",
            "EXIT_CODES"]
@@ -377,9 +376,9 @@ def _run_batch(args) -> int:
 
 def _run_demo(args) -> int:
     cases = {
-        "heart": (Shape(load_heart("diastole")), Shape(load_heart("systole")),
+        "heart": (heart_shape("diastole"), heart_shape("systole"),
                   "left ventricle, end-diastole -> end-systole (Sunnybrook, CC0)"),
-        "hands": (Shape(resample(load_hand(0), 120)), Shape(resample(load_hand(3), 140)),
+        "hands": (hand_shape(0, 120), hand_shape(3, 140),
                   "hand 0 (120 nodes) -> hand 3 (140 nodes) (statismo, BSD-3)"),
     }
     settings = Settings()

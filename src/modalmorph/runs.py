@@ -3,10 +3,9 @@
 :func:`morph_files` (``modalmorph morph``) and :func:`track_files` (``modalmorph track``)
 are shared by the command line, the batch workers (:mod:`modalmorph.batch`) and the web
 app (:mod:`modalmorph.app`). Their options are :class:`Settings`: one option object per
-stage (:mod:`modalmorph.options`) plus the two of this module, :class:`AlignOptions` and
-:class:`SequenceOptions`, whose fields carry the same metadata, so that the flags, the
-config file, the form and the record in ``result.json`` are generated from all of them
-alike (flat names: :func:`modalmorph.options.flat_fields`).
+stage (:mod:`modalmorph.options`), so that the flags, the config file, the form and the
+record in ``result.json`` are generated from all of them alike (flat names:
+:func:`modalmorph.options.flat_fields`).
 """
 
 from __future__ import annotations
@@ -26,19 +25,20 @@ from .io import atomic_output_dir, read_frames, read_shape, save_result, save_tr
 from .matching import match
 from .material import Material
 from .options import (
+    AlignOptions,
     MatchOptions,
     MorphOptions,
     OutputOptions,
     ReadOptions,
+    TrackOptions,
     flat_fields,
-    parse_value,
     split,
 )
 from .pipeline import morph
 from .report import input_images, write_html
-from .track import CORRESPONDENCES, REFERENCES, track
+from .track import track
 
-__all__ = ["AlignOptions", "SequenceOptions", "Settings", "ItemRun", "PAIR_CLASSES",
+__all__ = ["Settings", "ItemRun", "PAIR_CLASSES",
            "SEQUENCE_CLASSES", "BATCH_CLASSES", "FORM_CLASSES", "ONE_THREAD_NODES",
            "blas_threads", "check_tools", "default_text", "file_record", "input_records",
            "read_pair", "compute_morph", "morph_files", "track_files", "write_morph"]
@@ -49,67 +49,13 @@ __all__ = ["AlignOptions", "SequenceOptions", "Settings", "ItemRun", "PAIR_CLASS
 ONE_THREAD_NODES = 1000
 
 
-def _meta(help: str, *, kind: str, group: str, choices=None) -> dict:
-    return dict(help=help, group=group, kind=kind, choices=choices, flag=None)
-
-
-class _Checked:
-    """Validation of the closed sets and counts of the small option classes below."""
-
-    def __post_init__(self):
-        for f in fields(self):
-            value, meta = getattr(self, f.name), f.metadata
-            if meta["choices"] and value not in meta["choices"]:
-                raise OptionError(f"{f.name} must be one of {', '.join(meta['choices'])}, "
-                                  f"got {value!r}")
-            if meta["kind"] in ("int", "bool"):
-                parse_value(f.name, meta["kind"], value)  # refuses a wrong type
-            low = meta.get("low", 0)
-            if meta["kind"] == "int" and value < low:
-                raise OptionError(f"{f.name} must be an integer >= {low}, got {value!r}")
-
-    def record(self) -> dict:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
-
-
-@dataclass(frozen=True)
-class AlignOptions(_Checked):
-    """Whether :func:`modalmorph.morph` removes the rigid part first."""
-
-    remove_rigid: bool = field(default=False, metadata=_meta(
-        "remove rotation, translation and scale first (Horn): morph only the non-rigid "
-        "part, in fewer steps", kind="bool", group="alignment"))
-
-
-@dataclass(frozen=True)
-class SequenceOptions(_Checked):
-    """How :func:`modalmorph.track` follows a sequence (its own keyword arguments)."""
-
-    reference: str = field(default="previous", metadata=_meta(
-        "previous: morph each tracked frame onto the next; first: morph frame 0 straight "
-        "onto every frame", kind="str", group="sequence", choices=REFERENCES))
-    correspondence: str = field(default="nearest", metadata=_meta(
-        "nearest: pairs in the images' common frame, for consecutive frames; modal: "
-        "modal matching, for large motions", kind="str", group="sequence",
-        choices=CORRESPONDENCES))
-    cycle: bool = field(default=False, metadata=_meta(
-        "periodic sequence (a cardiac cycle): also morph the last frame back onto the "
-        "first and report the closure error", kind="bool", group="sequence"))
-    segments: int = field(default=6, metadata={**_meta(
-        "segments of equal arc length for the strain table", kind="int",
-        group="sequence"), "low": 1})
-    start_node: int = field(default=0, metadata={**_meta(
-        "node of the first frame where segment 1 starts", kind="int", group="sequence"),
-        "low": 0})
-
-
 # The option classes of each command, in the order of their flags and records.
 PAIR_CLASSES = (ReadOptions, MatchOptions, AlignOptions, MorphOptions, OutputOptions)
-SEQUENCE_CLASSES = (*PAIR_CLASSES, SequenceOptions)
-BATCH_CLASSES = (ReadOptions, MatchOptions, AlignOptions, MorphOptions, SequenceOptions)
+SEQUENCE_CLASSES = (*PAIR_CLASSES, TrackOptions)
+BATCH_CLASSES = (ReadOptions, MatchOptions, AlignOptions, MorphOptions, TrackOptions)
 FORM_CLASSES = (MatchOptions, AlignOptions, MorphOptions)
 _ATTRIBUTE = {ReadOptions: "read", MatchOptions: "match", MorphOptions: "morph",
-              AlignOptions: "align", OutputOptions: "output", SequenceOptions: "sequence"}
+              AlignOptions: "align", OutputOptions: "output", TrackOptions: "sequence"}
 
 
 @dataclass(frozen=True)
@@ -121,7 +67,7 @@ class Settings:
     morph: MorphOptions = field(default_factory=MorphOptions)
     align: AlignOptions = field(default_factory=AlignOptions)
     output: OutputOptions = field(default_factory=OutputOptions)
-    sequence: SequenceOptions = field(default_factory=SequenceOptions)
+    sequence: TrackOptions = field(default_factory=TrackOptions)
 
     @classmethod
     def from_flat(cls, values: dict, classes=SEQUENCE_CLASSES, *, where: str = "options"):
@@ -225,10 +171,7 @@ def read_pair(source_path, target_path, read: ReadOptions):
 
 
 def _read_kwargs(read: ReadOptions) -> dict:
-    kw = dict(nodes=read.nodes, threshold=read.threshold)
-    if read.object != ReadOptions.object:  # a reader without the keyword gets the default
-        kw["object"] = read.object
-    return kw
+    return dict(nodes=read.nodes, threshold=read.threshold, object=read.object)
 
 
 def compute_morph(source, target, settings: Settings, *, progress=None):
@@ -236,12 +179,8 @@ def compute_morph(source, target, settings: Settings, *, progress=None):
     with blas_threads(max(source.m, target.m)):
         matching = match(source, target, **settings.match.record())
         return morph(source, target, matching=matching,
-                     remove_rigid=settings.align.remove_rigid, progress=progress,
-                     **_morph_kwargs(settings.morph))
-
-
-def _morph_kwargs(options: MorphOptions) -> dict:
-    return {f.name: getattr(options, f.name) for f in fields(options)}
+                     remove_rigid=settings.align.remove_rigid, options=settings.morph,
+                     progress=progress)
 
 
 def morph_files(source, target, out, settings: Settings | None = None, *,
@@ -271,14 +210,13 @@ def write_morph(result, folder: Path, settings: Settings, *, inputs=(), images=N
     save_result(result, folder, params=result.params, options=settings.record(PAIR_CLASSES),
                 inputs=list(inputs))
     if output.figures or output.gif or output.mp4:
-        frames = {} if output.frames == OutputOptions.frames else {"frames": output.frames}
+        look = dict(frames=output.frames, background=output.background)
         if output.figures:
-            background = {} if output.background else {"background": False}
             plot.save_figures(result, folder, formats=("png", "svg") if output.svg else
-                              ("png",), **background, **frames)
+                              ("png",), **look)
         for wanted, name in ((output.gif, "morph.gif"), (output.mp4, "morph.mp4")):
             if wanted:
-                plot.animate(result, folder / name, **frames)
+                plot.animate(result, folder / name, **look)
     if output.vtk:
         plot.write_vtk_series(result, folder / "vtk")
     if output.html:
@@ -301,9 +239,8 @@ def track_files(inputs, out, settings: Settings | None = None, *, progress=None)
     check_tools(output)
     out = Path(out)
     with atomic_output_dir(out) as tmp:
-        frames = read_frames(inputs, threshold=settings.read.threshold,
-                             nodes=settings.read.nodes)
-        morph_kw = {**_morph_kwargs(settings.morph),
+        frames = read_frames(inputs, **_read_kwargs(settings.read))
+        morph_kw = {**{f.name: getattr(settings.morph, f.name) for f in fields(MorphOptions)},
                     "remove_rigid": settings.align.remove_rigid}
         with blas_threads(max(shape.m for shape in frames.shapes)):
             result = track(frames.shapes, names=frames.names, **seq.record(),

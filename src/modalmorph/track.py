@@ -13,16 +13,15 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field
 from functools import partial
-from numbers import Integral
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import MorphDivergedError, OptionError, ShapeError
 from .matching import match
-from .options import MatchOptions, MorphOptions
+from .options import CORRESPONDENCES, REFERENCES, MatchOptions, MorphOptions, TrackOptions
 from .pipeline import Morph, morph
 from .quality import curve_distances, self_crossings
 from .shape import Shape, as_shape
@@ -32,8 +31,6 @@ __all__ = ["REFERENCES", "CORRESPONDENCES", "Track", "TrackOptions", "track",
 
 log = logging.getLogger(__name__)
 
-REFERENCES = ("previous", "first")
-CORRESPONDENCES = ("nearest", "modal")
 
 
 @dataclass(frozen=True, eq=False)
@@ -117,44 +114,6 @@ class Track:
         return self.frames[0].with_points(self.points[f])
 
 
-@dataclass(frozen=True)
-class TrackOptions:
-    """How :func:`track` follows a sequence; validated on construction.
-
-    Attributes
-    ----------
-    reference : {"previous", "first"}
-        Morph from the tracked previous frame (small steps), or from frame 0 every time.
-    correspondence : {"nearest", "modal"}
-        ``"nearest"``: in the common frame, each observed node pulls at most one node, the
-        nearest of those whose nearest it is; the others follow the morph's rule for
-        unmatched nodes (consecutive frames, motions under the node spacing).
-        ``"modal"``: :func:`modalmorph.match` (large motions between frames).
-    cycle : bool
-        Also morph the last frame back onto frame 0 (periodic sequences; ``closure``).
-    segments, start_node : int
-        ``segment_strain`` over this many segments of equal arc length (6, those of a
-        left-ventricle short-axis slice), the first starting at node ``start_node``.
-    """
-
-    reference: str = "previous"
-    correspondence: str = "nearest"
-    cycle: bool = False
-    segments: int = 6
-    start_node: int = 0
-
-    def __post_init__(self):
-        if self.reference not in REFERENCES:
-            raise OptionError(f"reference must be one of {REFERENCES}, got {self.reference!r}")
-        if self.correspondence not in CORRESPONDENCES:
-            raise OptionError(f"correspondence must be one of {CORRESPONDENCES}, "
-                              f"got {self.correspondence!r}")
-        for name, low in (("segments", 1), ("start_node", 0)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, Integral) or value < low:
-                raise OptionError(f"{name} must be an integer >= {low}, got {value!r}")
-
-
 def track(frames, *, options: TrackOptions | None = None,
           names: Sequence[str] | None = None, match_options: MatchOptions | dict | None = None,
           morph_options: MorphOptions | dict | None = None,
@@ -213,11 +172,7 @@ def _track_options(options, overrides: dict) -> TrackOptions:
         options = TrackOptions()
     elif not isinstance(options, TrackOptions):
         raise OptionError(f"options must be a TrackOptions, got {type(options).__name__}")
-    known = [f.name for f in fields(TrackOptions)]
-    unknown = sorted(set(overrides) - set(known))
-    if unknown:
-        raise OptionError(f"unknown track option {unknown[0]!r}; known: {', '.join(known)}")
-    return replace(options, **overrides)
+    return options.replace(**overrides)
 
 
 def _follow(shapes, reference: str, step, progress) -> list:
