@@ -270,7 +270,7 @@ class Simulation:
         # the loads rise from zero over the first step (a(0) without them): a sudden load
         # excites the stiffest modes, which Newmark's scheme damps slowly unless
         # alpha = delta / 2 (measured: alpha = delta = 0.5, k = 1000, dt = 1 on the bundled
-        # heart swung 450 px at step 1 with the sudden load; ramped, it converges in 23 steps)
+        # heart swung 450 px at step 1 with the sudden load; ramped, at most 10 px: method.md §4)
         self._a = -(self._C @ self._v) - self._integrator.K @ x
         self._current = X1
         self._record(np.zeros_like(x), T0)
