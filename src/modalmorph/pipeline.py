@@ -10,9 +10,10 @@ import numpy as np
 from scipy import linalg
 
 from .dynamics import UNMATCHED_RULES, LoadTargets, Newmark, check_newmark
-from .element import FEModel, check_sigma
+from .element import check_sigma
 from .energy import node_energy
 from .material import POLYETHYLENE, Material
+from .model import FEModel
 from .modes import rayleigh
 from .quality import Polyline
 from .shape import Shape, as_shape, coarsen, resample
