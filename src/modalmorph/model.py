@@ -59,9 +59,9 @@ class FEModel:
         nodes further apart (smoother low modes) but make the Gram matrices
         ill-conditioned. ``None`` (default): ``DEFAULT_SIGMA`` (1) unless that makes
         ``Gamma`` ill-conditioned for this node set, then the largest width that does not
-        (:func:`auto_sigma`). A given value is used as it is, and refused with a
-        ``ValueError`` (naming the largest width that works) when the Gram matrix is
-        numerically singular. The width used is :attr:`sigma_rel`.
+        (:func:`~modalmorph.element.auto_sigma`). A given value is used as it is, and
+        refused with a ``ModelError`` (naming the largest width that works) when the Gram
+        matrix is numerically singular. The width used is :attr:`sigma_rel`.
     nominal_sigma : float, optional
         The width ``sigma=None`` starts from (default ``DEFAULT_SIGMA``; the matcher's
         models use 2).
@@ -78,15 +78,17 @@ class FEModel:
         for 3D point sets. ``"multilevel"``: the same truncated matrices, no
         factorisation; the lowest ``n`` modes of a coarse model give the starting
         subspace of a preconditioned LOBPCG iteration on the full model, stopped when
-        every residual is below a tolerance (:mod:`modalmorph.multilevel`; iterative, so
-        less accurate than the others: see there). ``"auto"`` (default) picks dense up to
-        ``AUTO_DENSE_MAX_DOF`` degrees of freedom (``d * m``), multilevel for 3D shapes
-        of ``AUTO_MULTILEVEL_MIN_NODES`` nodes or more, and sparse otherwise.
-        The resolved choice is :attr:`solver`.
+        every residual is below a tolerance (:mod:`modalmorph.solvers.multilevel`;
+        iterative, so less accurate than the others: see there). ``"auto"`` (default)
+        picks dense up to ``AUTO_DENSE_MAX_DOF`` degrees of freedom (``d * m``),
+        multilevel for 3D shapes of ``AUTO_MULTILEVEL_MIN_NODES`` nodes or more, and
+        sparse otherwise (:func:`modalmorph.solvers.choose`). The resolved choice is
+        :attr:`solver`; the sparse and multilevel models are :attr:`truncated`.
     cutoff : float, optional
         Sparse and multilevel solvers: the relative size below which interactions are
-        dropped (see :func:`cutoff_radius`; default 1e-10, a radius of 10.3 sigma, and
-        ``MULTILEVEL_CUTOFF`` = 1e-6, 8.1 sigma, for the multilevel solver). This
+        dropped (see :func:`~modalmorph.element.cutoff_radius`; default 1e-10, a radius of
+        10.3 sigma, and ``MULTILEVEL_CUTOFF`` = 1e-6, 8.1 sigma, for the multilevel
+        solver). This
         truncation is the sparse model's only approximation: with 1e-10, its lowest
         frequencies agree with the dense ones to about 1e-9 relative
         (``tests/test_scale.py``, ``benchmarks/scale.py``). A larger cutoff saves time and
@@ -96,9 +98,11 @@ class FEModel:
     Raises
     ------
     ValueError
-        For an invalid shape, a non-positive sigma, an unknown solver, or (when the modes
-        are computed) a sigma so large that the Gram matrix is numerically singular for
-        this node set.
+        For an invalid shape; an :class:`~modalmorph.errors.OptionError` for a sigma,
+        material, plane, solver or cutoff out of range.
+    ModelError
+        When the modes are computed: for a sigma so large that the Gram matrix is
+        numerically singular for this node set (all three are ``ValueError``).
     """
 
     def __init__(self, shape, *, sigma: float | None = None,
@@ -230,7 +234,7 @@ class FEModel:
 
     @cached_property
     def gram(self) -> tuple[np.ndarray, np.ndarray]:
-        """Dense ``(G, Gamma)``, each (m, m)."""
+        """Dense ``(G, Gamma)`` of the exact model, each (m, m)."""
         return gram_entries(self._offsets, self.sigma)
 
     @cached_property
@@ -433,7 +437,7 @@ class FEModel:
 def _check_reached(reached: np.ndarray) -> None:
     far = np.flatnonzero(~reached)
     if far.size:
-        raise ModelError(f"point {far[0]} lies beyond the cutoff radius of every node of the "
+        raise ValueError(f"point {far[0]} lies beyond the cutoff radius of every node of the "
                          f"model: use more model nodes or a larger sigma")
 
 

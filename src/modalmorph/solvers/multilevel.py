@@ -84,7 +84,7 @@ MULTILEVEL_CUTOFF = 1e-6
 # Nodes of the coarse model that gives the starting subspace: its 3 * 1000 degrees of
 # freedom are solved densely in about a second (benchmarks/model.py).
 COARSE_NODES = 1000
-# Relative residual below which a mode counts as converged (see solve_modes_multilevel
+# Relative residual below which a mode counts as converged (see the module's docstring
 # for what it means for the frequencies, measured against the exact solvers).
 MULTILEVEL_TOL = 5e-2
 # LOBPCG iterations at most. Quasi-uniform nodes converge in a few (the benchmark blob:
@@ -128,8 +128,7 @@ def solve(model, n: int, *, coarse_nodes: int = COARSE_NODES, tol: float = MULTI
     Parameters
     ----------
     model : FEModel
-        The full model (its pairs within ``model.cutoff_radius``; the coarse model comes
-        from ``model.coarsened``).
+        The full model (its ``pairs``; ``model.coarsened`` gives the coarse one).
     n : int
         Number of modes.
     coarse_nodes : int, optional
@@ -152,18 +151,16 @@ def solve(model, n: int, *, coarse_nodes: int = COARSE_NODES, tol: float = MULTI
     Raises
     ------
     ModelError
-        When a mode's residual is still above ``tol`` when the iterations stop, or the
-        coarse model fails.
+        When a residual is above ``tol`` when the iterations stop, or the coarse model fails.
     """
     d, m = model.dim, model.m
-    k = min(n + _guard(n), d * m // 2)
     clock = _Clock()
     # the solver's node order: leaves of a k-d tree, so that a node's neighbours are close
     # in memory and the preconditioner's patches are consecutive nodes
     order = cKDTree(model.points, leafsize=8).indices
     threads = max(1, int(threads))
     with ThreadPoolExecutor(threads) as pool:
-        start = [_coarse_start(model, n, k, coarse_nodes, order, pool)]
+        start = [_coarse_start(model, n, coarse_nodes, order, pool)]
         clock("coarse start")
         ops = Operators(model, order, pool, threads)
         clock("K_g and Gamma")
@@ -186,12 +183,13 @@ def solve(model, n: int, *, coarse_nodes: int = COARSE_NODES, tol: float = MULTI
                               model.material.rho, d)
 
 
-def _coarse_start(model, n: int, k: int, coarse_nodes: int, order: np.ndarray,
+def _coarse_start(model, n: int, coarse_nodes: int, order: np.ndarray,
                   pool: ThreadPoolExecutor) -> np.ndarray:
-    """The starting block (d*m, kc): the lowest ``kc`` modes of a model of the same
-    object on at most ``coarse_nodes`` nodes, as displacement fields at the fine nodes
-    (in the solver's node order)."""
+    """The starting block (d*m, kc): the lowest ``kc`` modes (``n`` and the guard) of a
+    model of the same object on at most ``coarse_nodes`` nodes, as displacement fields at
+    the fine nodes (in the solver's node order)."""
     cmodel = model.coarsened(min(coarse_nodes, model.m // 2))
+    k = min(n + _guard(n), model.dim * model.m // 2)
     kc = min(k, cmodel.dim * cmodel.m - 2)
     if kc <= n:
         raise ModelError(f"the multilevel solver needs more than n={n} coarse modes; this "
