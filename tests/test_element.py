@@ -7,6 +7,7 @@ from numpy.testing import assert_allclose
 from modalmorph import POLYETHYLENE, FEModel, Material
 from modalmorph.element import (
     gram_entries,
+    self_entries,
     stiffness_component_pairs,
     stiffness_components,
     stiffness_entries,
@@ -67,6 +68,17 @@ def test_stiffness_components_are_the_entries(d, rng):
         assert np.array_equal(v, blocks[:, a, b])  # the same operations
         assert_allclose(v, blocks[:, b, a], rtol=1e-15)  # K^ab = K^ba up to the last bit
     assert np.array_equal(gamma, gram_entries(r, 0.7)[1])
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_self_entries(d):
+    sigma, lam, mu = 0.7, 2.0, 1.5
+    k, gamma = self_entries(sigma, d, lam, mu)
+    V = (np.pi * sigma**2) ** (d / 2)
+    assert_allclose(gamma, V, rtol=1e-15)
+    assert_allclose(k, V / sigma**2 * ((lam + mu) / 2 + mu * d / 2), rtol=1e-14)
+    blocks = stiffness_entries(np.zeros((1, d)), sigma, lam, mu)[0]
+    assert_allclose(blocks, k * np.eye(d), rtol=1e-15, atol=0)  # isotropic at offset 0
 
 
 def test_gram_is_interpolation_basis(hand200):

@@ -25,7 +25,8 @@ from .shape import as_shape
 __all__ = ["DEFAULT_SIGMA", "AUTO_CONDITION", "MAX_CONDITION", "MIN_SIGMA", "MAX_SIGMA",
            "DEFAULT_CUTOFF", "AUTO_DENSE_MAX_DOF", "auto_sigma", "check_sigma",
            "cutoff_radius", "gaussian", "gram_entries", "stiffness_entries",
-           "stiffness_components", "stiffness_component_pairs", "gaussian_from_overlap",
+           "stiffness_components", "stiffness_component_pairs", "self_entries",
+           "gaussian_from_overlap",
            "auto_sigma_condition", "singular_gram"]
 
 # sigma in units of the mean nearest-neighbour spacing; chosen by measurement, see README.
@@ -113,14 +114,24 @@ def stiffness_entries(r: np.ndarray, sigma: float, lam: float, mu: float) -> np.
     ``K_g^ab = (lambda + mu) D^ab + mu delta_ab sum_c D^cc``
     ``= s (-(lambda + mu) / 4 r_a r_b + delta_ab t)`` with ``s = Gamma / sigma^4`` and
     ``t = (lambda + mu) sigma^2 / 2 + mu (d sigma^2 / 2 - |r|^2 / 4)``, shape
-    ``r.shape + (d,)``.
+    ``r.shape + (d,)``: a view of a (d, d) + ``r.shape[:-1]`` array, one contiguous block
+    per component (faster to fill, and to lay out component-major (7), than d x d blocks).
     """
     d = r.shape[-1]
     pairs = [(a, b) for a in range(d) for b in range(d)]
-    out = np.empty(r.shape + (d,))
+    out = np.empty((d, d) + r.shape[:-1])
     for (a, b), v in zip(pairs, _stiffness(r, sigma, lam, mu, pairs)[0], strict=True):
-        out[..., a, b] = v
-    return out
+        out[a, b] = v
+    return np.moveaxis(out, (0, 1), (-2, -1))
+
+
+def self_entries(sigma: float, d: int, lam: float, mu: float) -> tuple[float, float]:
+    """``(K_g^aa_ii, Gamma_ii)``: the stiffness and the mass (without rho) of one node and
+    one component in the Gaussian basis, the diagonal entries at offset 0,
+    ``V / sigma^2 ((lambda + mu) / 2 + mu d / 2)`` and ``V``: the reference scales of a
+    model's loads and time step."""
+    components, gamma = stiffness_components(np.zeros(d), sigma, lam, mu)
+    return float(components[0]), float(gamma)
 
 
 def _stiffness(r: np.ndarray, sigma: float, lam: float, mu: float,
