@@ -8,11 +8,12 @@ modal matching, Horn alignment, Lagrange's dynamic equilibrium and strain energy
 __version__ = "0.1.0"
 
 from .align import Similarity, align
-from .element import DEFAULT_SIGMA, FEModel
+from .element import DEFAULT_SIGMA
 from .errors import MorphDivergedError
 from .io import read_shape
 from .matching import Matching, match
 from .material import MATERIALS, POLYETHYLENE, RUBBER, UNIT, Material
+from .model import FEModel
 from .modes import Modes, rayleigh
 from .options import MatchOptions, MorphOptions
 from .pipeline import Morph, morph

@@ -30,8 +30,9 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from .align import Similarity, align
-from .element import FEModel, check_sigma
+from .element import check_sigma
 from .match3d import refine
+from .model import FEModel
 from .shape import Shape, as_shape, resample, spread_indices
 
 __all__ = ["Matching", "match", "modal_features", "affinity", "METHODS", "ROTATIONS"]

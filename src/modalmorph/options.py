@@ -27,9 +27,10 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from numbers import Integral, Real
 
 from .dynamics import UNMATCHED_RULES, check_newmark
-from .element import MAX_SIGMA, MIN_SIGMA, SOLVERS
+from .element import MAX_SIGMA, MIN_SIGMA
 from .errors import OptionError
 from .material import MATERIALS, POLYETHYLENE, Material
+from .solvers import SOLVERS
 
 __all__ = ["MatchOptions", "MorphOptions", "ReadOptions", "OutputOptions", "AlignOptions",
            "TrackOptions", "OPTION_CLASSES", "REFERENCES", "CORRESPONDENCES",

@@ -19,9 +19,10 @@ import numpy as np
 from scipy import linalg
 
 from .dynamics import LoadTargets, Newmark
-from .element import FEModel
+from .element import self_entries
 from .energy import node_energy
 from .errors import MorphDivergedError, OptionError
+from .model import FEModel
 from .modes import rayleigh
 from .options import MatchOptions, MorphOptions, flat_fields
 from .quality import Polyline
@@ -180,14 +181,12 @@ class Simulation:
         self.model = model = FEModel(reduced, sigma=o.sigma, material=o.material,
                                      solver=o.solver)
         self.n_modes = _mode_count(o.modes, model.dim * model.m,
-                                   sparse=model.solver in ("sparse", "multilevel"))
+                                   sparse=model.truncated)
         self.modes = md = model.modes(self.n_modes)
         self._MPhi = model.mass_times_modes(md)  # M Phi = (I kron A) M_g psi (method.md §1)
         # Reference scales: the stiffness and mass of one node in the Gaussian basis.
         d = work.dim
-        lam, mu = model.lame
-        V = (np.pi * model.sigma**2) ** (d / 2)
-        self.k_ref = V / model.sigma**2 * ((lam + mu) / 2 + mu * d / 2)
+        self.k_ref, V = self_entries(model.sigma, d, *model.lame)
         m_ref = o.material.rho * V
         w_ref = np.sqrt(self.k_ref / m_ref)
         # one spring per node; with a reduced model their total stiffness is kept the same
