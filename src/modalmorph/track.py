@@ -14,12 +14,13 @@ from __future__ import annotations
 import inspect
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from .matching import match
+from .options import MatchOptions
 from .pipeline import Morph, MorphDivergedError, morph
 from .quality import curve_distances, self_crossings
 from .shape import Shape, as_shape
@@ -260,6 +261,8 @@ def _options(options: dict | None, func, own: tuple, name: str) -> dict:
         raise ValueError(f"{name} must be a dict, got {type(options).__name__}")
     known = [p.name for p in inspect.signature(func).parameters.values()
              if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name not in own]
+    if func is match:  # match takes MatchOptions' fields by name
+        known = [f.name for f in fields(MatchOptions)]
     unknown = sorted(set(options) - set(known))
     if unknown:
         raise ValueError(f"{name}: unknown option(s) {unknown}; known: {', '.join(known)}")
