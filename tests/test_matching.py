@@ -7,6 +7,7 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from modalmorph.datasets import load_hand
+from modalmorph.errors import OptionError
 from modalmorph.matching import (
     Matching,
     _modal_deformation,
@@ -18,6 +19,7 @@ from modalmorph.matching import (
     match,
     modal_features,
 )
+from modalmorph.options import MatchOptions
 from modalmorph.shape import Shape
 
 from .conftest import sphere_points
@@ -304,6 +306,22 @@ def test_bad_input(hand90):
     with pytest.raises(ValueError, match="source is a closed contour with no area"):
         match(line, hand90)
     match(Shape(line, closed=False), Shape(hand90[:40], closed=False))  # open: fine
+
+
+def test_options_object_and_overrides_agree(hand90):
+    """match(options=MatchOptions(...)) and match(**fields) are one call; overrides win."""
+    target = np.roll(hand90[::-1], 7, axis=0)
+    by_name = match(hand90, target, rotation="none", modes=12)
+    by_object = match(hand90, target, options=MatchOptions(rotation="none", modes=12))
+    overridden = match(hand90, target, options=MatchOptions(rotation="free"),
+                       rotation="none", modes=12)
+    for other in (by_object, overridden):
+        assert_array_equal(other.pairs, by_name.pairs)
+        assert_array_equal(other.cost, by_name.cost)
+    with pytest.raises(OptionError, match="unknown MatchOptions option 'rotate'"):
+        match(hand90, target, rotate="none")
+    with pytest.raises(OptionError, match="options must be a MatchOptions"):
+        match(hand90, target, options={"rotation": "none"})
 
 
 def test_large_objects_agree_with_exact_path(monkeypatch):

@@ -6,6 +6,7 @@ from numpy.testing import assert_allclose
 
 from modalmorph.align import Similarity
 from modalmorph.quality import (
+    area,
     correspondence_rotation,
     curve_distances,
     roughness,
@@ -144,6 +145,14 @@ def test_roughness_of_circle_and_noise(rng):
     assert roughness(noisy) > 2 * base
     line = np.c_[np.linspace(0, 1, 50), np.zeros(50)]
     assert roughness(line, closed=False) < 1e-12  # an open straight line is smooth
+
+
+def test_area_sign_and_invariance(hand200, rng):
+    square = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
+    assert area(square) == 4.0  # counter-clockwise: positive, exact in binary
+    assert area(square[::-1]) == -4.0
+    moved = 3.0 * hand200 @ random_rotation(2, rng).T + [10.0, -5.0]
+    assert_allclose(area(moved), 9.0 * area(hand200), rtol=1e-10)  # rounding only
 
 
 def test_correspondence_rotation(hand200, rng):

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import OptionError, ShapeError
+
 __all__ = ["Similarity", "align"]
 
 # Source points whose spread is at most this fraction of their magnitude coincide (a few
@@ -54,30 +56,31 @@ class Similarity:
     def apply(self, points) -> np.ndarray:
         """Transform points of shape (m, d) (or one point (d,)); returns the same shape.
 
-        Raises ValueError if ``points`` are not finite or their images overflow float64.
+        Raises ShapeError (a ValueError) if ``points`` are not finite or their images
+        overflow float64.
         """
         p = np.asarray(points, dtype=np.float64)
         if p.ndim not in (1, 2) or p.shape[-1] != self.dim:
-            raise ValueError(f"points must have {self.dim} coordinates per row, got "
+            raise ShapeError(f"points must have {self.dim} coordinates per row, got "
                              f"shape {p.shape}")
         if not np.isfinite(p).all():
-            raise ValueError("points must be finite (no NaN or inf)")
+            raise ShapeError("points must be finite (no NaN or inf)")
         with np.errstate(over="ignore", invalid="ignore"):
             out = self.scale * p @ self.rotation.T + self.translation
         if not np.isfinite(out).all():
-            raise ValueError("the transformed points overflow float64")
+            raise ShapeError("the transformed points overflow float64")
         return out
 
     def inverse(self) -> Similarity:
         """The similarity that undoes this one.
 
-        Raises ValueError if its scale or translation overflow float64.
+        Raises ShapeError (a ValueError) if its scale or translation overflow float64.
         """
         rt = self.rotation.T
         with np.errstate(over="ignore", invalid="ignore"):
             scale, translation = 1.0 / self.scale, -(rt @ self.translation) / self.scale
         if not (np.isfinite(scale) and np.isfinite(translation).all()):
-            raise ValueError(f"the inverse of a similarity of scale {self.scale:.3g} and "
+            raise ShapeError(f"the inverse of a similarity of scale {self.scale:.3g} and "
                              f"translation {self.translation} overflows float64")
         return Similarity(rotation=rt, scale=scale, translation=translation)
 
@@ -130,38 +133,26 @@ def align(source_points, target_points, *, scale: bool = True,
 
     Raises
     ------
-    ValueError
+    ShapeError
         If the arrays differ in shape, are not (k, 2) or (k, 3), are not finite, have fewer
         than 2 points, the source points all coincide, or the similarity overflows float64
         (target and source sizes more than ~1e308 apart).
+    OptionError
+        If ``scale`` is not a bool.
     """
-    for name, a in (("source_points", source_points), ("target_points", target_points)):
-        if np.iscomplexobj(a):
-            raise ValueError(f"{name} must be real coordinates, got complex numbers")
-    left = np.asarray(source_points, dtype=np.float64)
-    right = np.asarray(target_points, dtype=np.float64)
     if not isinstance(scale, bool | np.bool_):
-        raise ValueError(f"scale must be True or False, got {scale!r}")
-    for name, a in (("source_points", left), ("target_points", right)):
-        if a.ndim != 2 or a.shape[1] not in (2, 3):
-            raise ValueError(f"{name} must have shape (k, 2) or (k, 3), got {a.shape}")
-        if not np.isfinite(a).all():
-            raise ValueError(f"{name} must be finite (no NaN or inf)")
-    if left.shape != right.shape:
-        raise ValueError(f"source_points and target_points must have the same shape, got "
-                         f"{left.shape} and {right.shape}")
-    k, d = left.shape
-    if k < 2:
-        raise ValueError(f"align needs at least 2 corresponding points, got {k}")
+        raise OptionError(f"scale must be True or False, got {scale!r}")
+    left, right = _corresponding(source_points, target_points)
+    d = left.shape[1]
     # Centred (section 5.2), each set divided by its largest centred coordinate so that no
     # square over- or underflows; the scale is put back in ``s`` below.
     mean_l, mean_r = _mean(left), _mean(right)
     cl, cr = left - mean_l, right - mean_r
     if not (np.isfinite(cl).all() and np.isfinite(cr).all()):
-        raise ValueError("source_points or target_points span more than float64 can hold")
+        raise ShapeError("source_points or target_points span more than float64 can hold")
     unit_l, unit_r = np.abs(cl).max(), np.abs(cr).max()
     if unit_l <= _COINCIDE * np.abs(left).max():
-        raise ValueError("source_points all coincide: the similarity is undetermined")
+        raise ShapeError("source_points all coincide: the similarity is undetermined")
     cl = cl / unit_l
     cr = cr / unit_r if unit_r > 0 else cr
     norm_l, norm_r = np.sum(cl**2), np.sum(cr**2)
@@ -170,9 +161,29 @@ def align(source_points, target_points, *, scale: bool = True,
         s = float(np.sqrt(norm_r / norm_l) * (unit_r / unit_l)) if scale else 1.0  # symmetric
         t = mean_r - s * R @ mean_l
     if not (np.isfinite(s) and s > 0 and np.isfinite(t).all()):
-        raise ValueError(f"the similarity overflows float64 (scale {s:.3g}): source_points and "
+        raise ShapeError(f"the similarity overflows float64 (scale {s:.3g}): source_points and "
                          f"target_points differ too much in size or position")
     return Similarity(rotation=R, scale=s, translation=t)
+
+
+def _corresponding(source_points, target_points) -> tuple[np.ndarray, np.ndarray]:
+    """Both point sets as float arrays (k, d), checked as :func:`align` documents."""
+    for name, a in (("source_points", source_points), ("target_points", target_points)):
+        if np.iscomplexobj(a):
+            raise ShapeError(f"{name} must be real coordinates, got complex numbers")
+    left = np.asarray(source_points, dtype=np.float64)
+    right = np.asarray(target_points, dtype=np.float64)
+    for name, a in (("source_points", left), ("target_points", right)):
+        if a.ndim != 2 or a.shape[1] not in (2, 3):
+            raise ShapeError(f"{name} must have shape (k, 2) or (k, 3), got {a.shape}")
+        if not np.isfinite(a).all():
+            raise ShapeError(f"{name} must be finite (no NaN or inf)")
+    if left.shape != right.shape:
+        raise ShapeError(f"source_points and target_points must have the same shape, got "
+                         f"{left.shape} and {right.shape}")
+    if len(left) < 2:
+        raise ShapeError(f"align needs at least 2 corresponding points, got {len(left)}")
+    return left, right
 
 
 def _mean(a: np.ndarray) -> np.ndarray:

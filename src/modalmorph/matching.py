@@ -17,28 +17,31 @@ searches are offered:
     sign, rotations inside degenerate eigenspaces, mode order), combined with position,
     and alternated with Horn's alignment (:func:`modalmorph.align.align`) and a smooth
     deformation in the lowest modes. Ordered contours are matched by an order-preserving
-    (cyclic for closed ones) search; point clouds by assignment. See :func:`match`.
+    (cyclic for closed ones) search; point clouds by assignment. Its stages, in order:
+    :func:`_prepare` (modes and signatures), :func:`_contour_pose` or :func:`_cloud_pose`
+    (the pose search and the common-frame decision), :func:`_alternate` (search, alignment
+    and deformation), :func:`_keep_or_turn` and :func:`_final_pairs` (the last search and
+    the rejection). See :func:`match`.
 """
 
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from .align import Similarity, align
-from .element import check_sigma
+from .errors import OptionError, ShapeError
 from .match3d import refine
 from .model import FEModel
+from .options import METHODS, ROTATIONS, MatchOptions
+from .quality import area
 from .shape import Shape, as_shape, resample, spread_indices
 
 __all__ = ["Matching", "match", "modal_features", "affinity", "METHODS", "ROTATIONS"]
-
-METHODS = ("auto", "local", "global")
-ROTATIONS = ("auto", "free", "none")
 
 # Defaults chosen by measurement on the families of benchmarks/matching.py (3 pairs each,
 # auto method, precision/recall overall): sigma 1 -> 0.90/0.75, sigma 2 -> 0.95/0.95,
@@ -56,6 +59,9 @@ COARSE = 1000
 ALTERNATION_NODES = 400
 # Largest m x n affinity matrix the paper's local/global searches may build.
 MAX_AFFINITY = 4e7  # larger objects are modelled on an evenly spread subset of nodes
+# A closed contour whose shoelace area, relative to its unit RMS radius, is below this has
+# its nodes on one line: rounding leaves ~1e-16 per node there, a circle has pi.
+FLAT_AREA = 5e-10
 _COARSE_NODES = 64  # resolution of the pose search of the default method
 _COARSE_NODES_CLOUD = 256  # the same for point sets, which have only 4 candidate poses
 _ANGLES = 24  # rotations tried by the pose search in 2D
@@ -75,8 +81,7 @@ _TURN_EVIDENCE = 7.5
 # Measured (total of the best common-frame pose / best total): the 16 shared heart pairs
 # (ED -> ES, one image frame) 1.00-1.51, seven of them above 1.0 (their best pose turned
 # 60-165 degrees); four hand pairs turned by 25 / 45 / 60 / 90 / 180 degrees 1.65-3.7 /
-# 2.1-7.4 / 3.1-12.7 / 5.2-17.6 / 6.2-22.1. Below 45 degrees the common-frame start still
-# finds the turn: the alignment in the alternation is free.
+# 2.1-7.4 / 3.1-12.7 / 5.2-17.6 / 6.2-22.1.
 _COMMON_MARGIN = 2.0
 # rotation="auto" in the common frame: the alternation is run without a turn and with one;
 # the turn wins when it lowers the search's objective below this fraction. Measured
@@ -84,6 +89,32 @@ _COMMON_MARGIN = 2.0
 # turned, near-circular ones drift by up to 15 degrees and fold), hand pairs turned by 25
 # and 30 degrees whose pose search chose the common frame: 0.37.
 _TURN_GAIN = 0.5
+
+# The default search's costs, in squared target node spacings.
+_SKIP = 16.0  # leaving a source node unmatched
+_REPEAT = 4.0  # one target for two consecutive source nodes (a denser source)
+_TRUST = 4.0  # pairs costing at most this are trusted for the alignment and deformation
+_REJECT = 16.0  # pairs costing more than this are dropped (4 spacings)
+# A source whose spacing (after the similarity) is below this fraction of the target's may
+# put consecutive nodes on one target (at the cost _REPEAT).
+_DENSE = 0.95
+_SIG_WIDTH = 2  # modes summed per signature entry
+# Weight of the modal signature against position. Measured (benchmarks/matching.py, 4 pairs
+# a family, seeds 2005 and 7): 1 instead of 4 lifts the precision on two different hands
+# from 0.74 to 0.80 and changes no other family.
+_SIG_WEIGHT = 1.0
+# The alternation: _RIGID rounds of search and Horn alignment, then up to _DEFORM_ROUNDS
+# with the deformation too, fitted with _STIFF times the modal strain energy and with the
+# along-contour part of each residual weighted by _TANGENTIAL. Measured (the same runs;
+# overall precision/recall; drop10; combined): 4 rounds all with deformation and an
+# isotropic fit 0.931/0.919; 0.908/0.896; 0.723/0.720, these values 0.967/0.960;
+# 1.000/0.994; 0.876/0.892. The first pairs come from a rigid pose and near a missing
+# stretch or a strong warp whole runs of them sit a node or two along the contour from the
+# truth: a deformation fitted to them at once locks that slip in.
+_RIGID = 3
+_DEFORM_ROUNDS = 8
+_STIFF = 1e-3
+_TANGENTIAL = 0.3
 
 
 @dataclass(frozen=True, eq=False)
@@ -110,6 +141,8 @@ class Matching:
         target, from Horn's method on the final pairs; ``None`` otherwise.
     shape : tuple of int
         ``(m, n)``, the node counts of source and target.
+    options : MatchOptions or None
+        The options of the call that found them (recorded with a morph's parameters).
     """
 
     pairs: np.ndarray
@@ -119,6 +152,7 @@ class Matching:
     sigma: float | None
     similarity: Similarity | None
     shape: tuple
+    options: MatchOptions | None = None
 
     @property
     def source(self) -> np.ndarray:
@@ -442,31 +476,6 @@ def _pairs_from_j(j: np.ndarray, cost: np.ndarray, one_to_one: bool) -> np.ndarr
     return pairs
 
 
-_SKIP = 16.0  # cost of leaving a source node unmatched (squared target spacings)
-_SIG_WEIGHT = 1.0  # weight of the modal signature against position
-_SIG_WIDTH = 2  # modes summed per signature entry
-_RIGID = 3  # first alternations: Horn alignment only (the deformation waits for the pose)
-_ITERATIONS = 12  # most alternations of matching, Horn alignment and modal deformation
-_STIFF = 1e-3  # modal strain-energy penalty of the deformation step
-_TANGENTIAL = 0.3  # weight of the along-contour part of a residual in the deformation fit
-_REPEAT = 4.0  # extra cost of one target for consecutive source nodes (squared spacings)
-_TRUST = 4.0  # pairs trusted for the alignment and deformation fits (squared spacings)
-_REJECT = 16.0  # pairs costing more than this (squared target spacings) are dropped
-
-# Measured on benchmarks/matching.py, 4 pairs per family and seeds 2005 and 7 (precision /
-# recall overall; drop10; combined): 4 alternations all with deformation, signature weight
-# 4, isotropic fit: 0.931/0.919; 0.908/0.896; 0.723/0.720. Why: the first pairs come from
-# a rigid pose, and near a missing stretch or a strong warp whole runs of them sit one or
-# two nodes along the contour from the truth; a deformation fitted to them at once slides
-# the source along with them and locks the error in (deformation off: drop10 1.000). Three
-# rigid alternations first, then up to 12 with the deformation fitted mostly to the
-# across-contour part of each residual (the along-contour part of a pair is what is in
-# doubt): 0.967/0.960; 1.000/0.994; 0.876/0.892. A signature weight of 1 instead of 4
-# helps two different hands (0.74 -> 0.80 precision) and costs nothing elsewhere.
-_AUTO = dict(skip=_SKIP, sig_weight=_SIG_WEIGHT, width=_SIG_WIDTH, rigid=_RIGID,
-             iterations=_ITERATIONS, stiff=_STIFF, tangential=_TANGENTIAL, trust=_TRUST,
-             dense=0.95, repeat=_REPEAT)
-
 
 def _pose_candidates(d: int, x: np.ndarray, y: np.ndarray, rotation: str
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -514,179 +523,275 @@ def _pose_search(C: np.ndarray, candidates: np.ndarray, closed: bool, skip: floa
     return best_total, *best
 
 
-def _search(z, yo, Fo, h2, rows, ordered, closed, skip, repeat, many_to_one):
+# --------------------------------------------------------------------------- the default
+
+
+@dataclass(frozen=True, eq=False)
+class _Problem:
+    """Source and target as the default matcher sees them (:func:`_prepare`)."""
+
+    src: Shape
+    tgt: Shape
+    phi: np.ndarray  # source modes (m, d, k), normalised frame
+    freq: np.ndarray  # their frequencies (k,)
+    F: np.ndarray  # signature cost (m, n), squared target spacings
+    rotation: str
+
+    @property
+    def ordered(self) -> bool:
+        return bool(self.src.ordered and self.tgt.ordered)
+
+    @property
+    def closed(self) -> bool:
+        return self.ordered and self.src.closed and self.tgt.closed
+
+
+@dataclass(frozen=True, eq=False)
+class _Costs:
+    """What one search compares: the source nodes ``x`` (m, d) placed somewhere, against
+    the target ``y`` (n, d) in search order (reversed when the pose search reversed it)
+    with the signature cost ``F`` (m, n) in the same order; ``h2`` the target's squared
+    node spacing; ``repeat`` and ``many`` as in :func:`_monotone` and
+    :func:`_pairs_from_j`."""
+
+    x: np.ndarray
+    y: np.ndarray
+    F: np.ndarray
+    h2: float
+    ordered: bool
+    closed: bool
+    repeat: float = np.inf
+    many: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class _Fit:
+    """The alternation's setting: its search on the source nodes ``sub``, the source
+    modes for the deformation and, for contours, the metric (n, d, d) that weights the
+    along-contour part of a residual by ``_TANGENTIAL``."""
+
+    costs: _Costs
+    sub: np.ndarray
+    phi: np.ndarray
+    freq: np.ndarray
+    metric: np.ndarray | None
+
+
+@dataclass(frozen=True, eq=False)
+class _Pose:
+    """The outcome of the pose search: the similarity to start from, the same pose with a
+    turn allowed, whether the target is searched reversed, whether the alternation may
+    rotate and whether a turned start is to be tried too (``common``)."""
+
+    sim: Similarity
+    turned: Similarity
+    reverse: bool = False
+    rotate: bool = True
+    common: bool = False
+
+
+def _search(costs: _Costs, z: np.ndarray, rows: np.ndarray):
     """Pairs (row index, target index) for the source nodes ``rows`` placed at ``z``, and
     the cost matrix: order-preserving for contours, an assignment for point sets."""
-    C = _sq_dist(z[rows], yo) / h2 + Fo[rows]
-    if ordered:
-        j, _ = _ordered_pairs(C, closed, skip, repeat)
-        return _pairs_from_j(j, C, one_to_one=not many_to_one), C
+    C = _sq_dist(z[rows], costs.y) / costs.h2 + costs.F[rows]
+    if costs.ordered:
+        j, _ = _ordered_pairs(C, costs.closed, _SKIP, costs.repeat)
+        return _pairs_from_j(j, C, one_to_one=not costs.many), C
     r, c = linear_sum_assignment(C)
     return np.c_[r, c], C
 
 
-def _trusted(pairs: np.ndarray, cost: np.ndarray, trust: float, d: int) -> np.ndarray:
+def _trusted(pairs: np.ndarray, cost: np.ndarray, d: int) -> np.ndarray:
     """The pairs trusted for the alignment and deformation fits: those costing at most
-    ``trust``, or all of them when too few are."""
-    good = pairs[cost <= trust]
+    ``_TRUST``, or all of them when too few are."""
+    good = pairs[cost <= _TRUST]
     return pairs if len(good) < max(d + 1, len(pairs) // 4) else good
 
 
-def _objective(z, rows, fit, repeat, many) -> float:
-    """The search's objective for the source placed at ``z``: pair costs plus ``skip``
-    for every source node of ``rows`` left unmatched."""
-    pairs, C = _search(z, fit["yo"], fit["Fo"], fit["h2"], rows, fit["ordered"],
-                       fit["closed"], fit["opt"]["skip"], repeat, many)
-    return float(C[pairs[:, 0], pairs[:, 1]].sum() + fit["opt"]["skip"]
-                 * (len(rows) - len(pairs)))
+def _trusted_pairs(costs: _Costs, z: np.ndarray, sub: np.ndarray):
+    """Search the source nodes ``sub`` placed at ``z``: the trusted pairs (source index,
+    target index) and the total cost of all pairs."""
+    pairs, C = _search(costs, z, sub)
+    cost = C[pairs[:, 0], pairs[:, 1]]
+    return _trusted(np.c_[sub[pairs[:, 0]], pairs[:, 1]], cost, z.shape[1]), cost.sum()
 
 
-def _alternate(sim, rotate: bool, *, x, yo, Fo, h2, sub, ordered, closed, phi, freq,
-               metric, opt, repeat, many) -> np.ndarray:
-    """Alternate the search on the source nodes ``sub`` with Horn's alignment (rotation
-    only when ``rotate``) and, after ``opt["rigid"]`` rounds, a smooth deformation in the
-    source's lowest modes fitted to the trusted pairs. Returns where the fitted
-    similarity and deformation take every source node, (m, d), target frame."""
-    d = x.shape[1]
-    shift = np.zeros_like(x)
-    previous = None
-    it = -1
-    while (it := it + 1) < opt["iterations"] - 1:
-        pairs, C = _search(sim.apply(x) + shift, yo, Fo, h2, sub, ordered, closed,
-                           opt["skip"], repeat, many)
-        cost = C[pairs[:, 0], pairs[:, 1]]
-        good = _trusted(np.c_[sub[pairs[:, 0]], pairs[:, 1]], cost, opt["trust"], d)
-        # the fits depend on the trusted pairs alone: the same ones twice running, fitted
-        # the same way, are a fixed point
-        if previous is not None and np.array_equal(good, previous):
-            if it > opt["rigid"]:
-                break
-            # a fixed point of the rigid fit: the rigid alternations left would repeat this
-            # one exactly, so go on with the deformation at once
-            it = max(it, opt["rigid"])
-        previous = good
-        sim = align(x[good[:, 0]], yo[good[:, 1]], rotate=rotate)
-        if it >= opt["rigid"]:
-            rows = good[:, 0]
-            resid = yo[good[:, 1]] - sim.apply(x[rows])
-            shift = _modal_deformation(phi, freq, sim.rotation, rows, resid, opt["stiff"],
-                                       None if metric is None else metric[good[:, 1]])
-    return sim.apply(x) + shift
+def _objective(costs: _Costs, z: np.ndarray) -> float:
+    """The search's objective for the source placed at ``z``: pair costs plus ``_SKIP``
+    for every source node left unmatched."""
+    pairs, C = _search(costs, z, np.arange(len(z)))
+    return float(C[pairs[:, 0], pairs[:, 1]].sum() + _SKIP * (len(z) - len(pairs)))
 
 
-def _match_auto(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: float,
-                options: dict | None = None, *, rotation: str = "auto"
-                ) -> tuple[np.ndarray, np.ndarray, Similarity, np.ndarray]:
-    """The default matcher; also returns where the fitted similarity and deformation take
-    every source node (the target's user coordinates), shape (m, d)."""
-    opt = dict(_AUTO, **(options or {}))
-    x, y = src.normalized, tgt.normalized
-    n, d = tgt.m, src.dim
-    ordered = bool(src.ordered and tgt.ordered)
-    closed = ordered and src.closed and tgt.closed
+def _prepare(src: Shape, tgt: Shape, n_modes: int, sigma: float | None,
+             rotation: str) -> _Problem:
+    """The source's modes and the signature cost between every source and target node."""
     phi1, w1 = modal_features(src, n_modes, sigma=sigma)
     phi2, _ = modal_features(tgt, n_modes, sigma=sigma)
-    sig1, sig2 = _signature(phi1, opt["width"]), _signature(phi2, opt["width"])
-    F = opt["sig_weight"] * _sq_dist(sig1, sig2) / sig1.shape[1]
-    h2 = tgt.spacing**2
+    sig1, sig2 = _signature(phi1, _SIG_WIDTH), _signature(phi2, _SIG_WIDTH)
+    F = _SIG_WEIGHT * _sq_dist(sig1, sig2) / sig1.shape[1]
+    return _Problem(src, tgt, phi1, w1, F, rotation)
 
-    # pose search on a coarse subset: every candidate rotation, both target directions
-    coarse = _COARSE_NODES if ordered else _COARSE_NODES_CLOUD
-    ci, cj = spread_indices(src, coarse), spread_indices(tgt, coarse)
-    hc2 = h2 * (n / len(cj)) ** 2
-    rots, near, cos = _pose_candidates(d, x, y, rotation)
-    evidence = cos < np.cos(np.radians(_TURN_EVIDENCE))  # poses that show a turn
-    # common: the common frame won the pose search, but its cheapest pose was turned by
-    # more than _TURN_EVIDENCE: both the turned and the unturned alternation are tried
-    rotate, common = rotation != "none", False
+
+def _coarse_costs(p: _Problem):
+    """The pose search's cost (r, mc, nc) of every candidate rotation on evenly spread
+    subsets ``ci``, ``cj`` of the nodes; also the mask of the common-frame rotations and of
+    those turned enough to show a turn (:func:`_pose_candidates`)."""
+    x, y = p.src.normalized, p.tgt.normalized
+    coarse = _COARSE_NODES if p.ordered else _COARSE_NODES_CLOUD
+    ci, cj = spread_indices(p.src, coarse), spread_indices(p.tgt, coarse)
+    hc2 = p.tgt.spacing**2 * (p.tgt.m / len(cj)) ** 2
+    rots, near, cos = _pose_candidates(p.src.dim, x, y, p.rotation)
     z = np.einsum("rab,ib->ria", rots, x[ci])
     yc = y[cj]
     D = (np.sum(z**2, -1)[:, :, None] + np.sum(yc**2, -1)[None, None, :]
          - 2 * np.einsum("ria,ja->rij", z, yc)) / hc2
-    C = D + F[np.ix_(ci, cj)]
-    if ordered:
-        repeat = opt["repeat"] if len(ci) > len(cj) else np.inf
-        total, Cb, reverse, r = _pose_search(C, np.arange(len(rots)), closed, opt["skip"],
-                                             repeat)
-        if rotation == "auto":  # the common frame unless another pose is clearly better
-            total_near, Cn, rev_near = (total, Cb, reverse) if near[r] else _pose_search(
-                C, np.flatnonzero(near), closed, opt["skip"], repeat)[:3]
-            if total_near <= _COMMON_MARGIN * total:
-                Cb, reverse, common, rotate = Cn, rev_near, evidence[r], False
-        jj, _ = _ordered_pairs(Cb, closed, opt["skip"], repeat)
-        keep = jj >= 0
-        if reverse:
-            jj = len(cj) - 1 - jj
-        pi, pj = ci[keep], cj[jj[keep]]
-    else:
-        reverse = False
-        starts = [(ci[r], cj[c]) for r, c in map(linear_sum_assignment, C)]
-    sim = align(x[pi], y[pj], rotate=rotate) if ordered else None
-    turned = align(x[pi], y[pj]) if ordered else None  # the same pose, turn allowed
+    evidence = cos < np.cos(np.radians(_TURN_EVIDENCE))
+    return D + p.F[np.ix_(ci, cj)], ci, cj, near, evidence
 
-    order = np.arange(n)[::-1] if reverse else np.arange(n)
-    Fo = F[:, order]
-    yo = y[order]
-    # the alternation runs on at most ALTERNATION_NODES source nodes; the final search,
-    # with the fitted similarity and deformation, on all of them
-    sub = spread_indices(src, ALTERNATION_NODES)
-    if not ordered:
-        # point sets: the coarse costs of the 4 poses can be close (one 180 degrees off won
-        # on a 2000-node benchmark blob); a few rigid rounds of search and alignment on
-        # the subset from each pose tell them apart, and the best one goes on
-        def rounds(s):
-            for _ in range(_POSE_ROUNDS):
-                pairs, C = _search(s.apply(x), yo, Fo, h2, sub, False, False, opt["skip"],
-                                   np.inf, False)
-                good = _trusted(pairs, C[pairs[:, 0], pairs[:, 1]], opt["trust"], d)
-                s = align(x[sub[good[:, 0]]], yo[good[:, 1]], rotate=rotate)
-            return C[pairs[:, 0], pairs[:, 1]].sum(), s  # of the last search
 
-        tried = [rounds(align(x[i], y[j], rotate=rotate)) for i, j in starts]
-        best = min(range(len(tried)), key=lambda r: tried[r][0])
-        if rotation == "auto":  # the common frame unless another pose is clearly better
-            near_best = min(np.flatnonzero(near), key=lambda r: tried[r][0])
-            if tried[near_best][0] <= _COMMON_MARGIN * tried[best][0]:
-                common, rotate, best = evidence[best], False, near_best
-        sim = turned = tried[best][1]
+def _contour_pose(p: _Problem) -> _Pose:
+    """Pose of an ordered contour: the cheapest rotation and target direction of the
+    order-preserving search on the coarse nodes; with ``rotation="auto"`` the best
+    common-frame pose unless another is cheaper by more than ``_COMMON_MARGIN``."""
+    C, ci, cj, near, evidence = _coarse_costs(p)
+    repeat = _REPEAT if len(ci) > len(cj) else np.inf
+    total, Cb, reverse, r = _pose_search(C, np.arange(len(C)), p.closed, _SKIP, repeat)
+    rotate, common = p.rotation != "none", False
+    if p.rotation == "auto":
+        total_near, Cn, rev_near = (total, Cb, reverse) if near[r] else _pose_search(
+            C, np.flatnonzero(near), p.closed, _SKIP, repeat)[:3]
+        if total_near <= _COMMON_MARGIN * total:
+            Cb, reverse, common, rotate = Cn, rev_near, evidence[r], False
+    jj, _ = _ordered_pairs(Cb, p.closed, _SKIP, repeat)
+    keep = jj >= 0
+    if reverse:
+        jj = len(cj) - 1 - jj
+    xs, ys = p.src.normalized[ci[keep]], p.tgt.normalized[cj[jj[keep]]]
+    return _Pose(align(xs, ys, rotate=rotate), align(xs, ys), reverse, rotate, common)
 
-    # one target per source node, unless the source is denser than the target
-    denser = src.spacing * sim.scale < opt["dense"] * tgt.spacing
-    repeat = opt["repeat"] if denser else np.inf
+
+def _cloud_pose(p: _Problem, costs: _Costs, sub: np.ndarray) -> _Pose:
+    """Pose of a point set: each candidate's coarse assignment, then ``_POSE_ROUNDS``
+    rigid rounds of search and alignment on ``sub`` from each (the coarse costs of poses
+    180 degrees apart can be close); the cheapest, or with ``rotation="auto"`` the best
+    common-frame pose unless another is cheaper by more than ``_COMMON_MARGIN``."""
+    C, ci, cj, near, evidence = _coarse_costs(p)
+    x, y = costs.x, costs.y
+    rotate, common = p.rotation != "none", False
+    tried = []
+    for r, c in map(linear_sum_assignment, C):
+        sim = align(x[ci[r]], y[cj[c]], rotate=rotate)
+        for _ in range(_POSE_ROUNDS):
+            good, total = _trusted_pairs(costs, sim.apply(x), sub)
+            sim = align(x[good[:, 0]], y[good[:, 1]], rotate=rotate)
+        tried.append((total, sim))
+    best = min(range(len(tried)), key=lambda r: tried[r][0])
+    if p.rotation == "auto":
+        near_best = min(np.flatnonzero(near), key=lambda r: tried[r][0])
+        if tried[near_best][0] <= _COMMON_MARGIN * tried[best][0]:
+            common, rotate, best = evidence[best], False, near_best
+    return _Pose(tried[best][1], tried[best][1], False, rotate, common)
+
+
+def _fits(p: _Problem, pose: _Pose, costs: _Costs, sub: np.ndarray) -> tuple[_Fit, _Costs]:
+    """The alternation's setting and the final search's costs. One target per source node,
+    unless the source (or the alternation's subset ``sub``) is denser than the target."""
+    s, h = pose.sim.scale, _DENSE * p.tgt.spacing
+    denser = p.src.spacing * s < h
+    final = replace(costs, repeat=_REPEAT if denser else np.inf, many=denser)
+    sub_denser = p.src.spacing * p.src.m / len(sub) * s < h
     metric = None
-    if ordered:  # metric of the deformation fit: across-contour 1, along-contour smaller
-        t = _tangents(yo, closed)
-        metric = np.eye(d) - (1 - np.sqrt(opt["tangential"])) * t[:, :, None] * t[:, None, :]
-    sub_denser = src.spacing * src.m / len(sub) * sim.scale < opt["dense"] * tgt.spacing
-    fit = dict(x=x, yo=yo, Fo=Fo, h2=h2, sub=sub, ordered=ordered, closed=closed,
-               phi=phi1, freq=w1, metric=metric, opt=opt,
-               repeat=repeat if sub_denser else np.inf, many=sub_denser)
-    z = _alternate(sim, rotate, **fit)
-    if rotation == "auto" and common:
-        # the common frame won, but a turned pose had cost less: kept without a turn
-        # unless turning fits far better in the end (a shape turned by 5-45 degrees)
-        free = _alternate(turned, True, **fit)
-        totals = [_objective(zz, np.arange(src.m), fit, repeat, denser) for zz in (z, free)]
-        if totals[1] < _TURN_GAIN * totals[0]:
-            z = free
-    pairs, C = _search(z, yo, Fo, h2, np.arange(src.m), ordered, closed, opt["skip"],
-                       repeat, denser)
+    if costs.ordered:  # across-contour 1, along-contour _TANGENTIAL (squared)
+        t = _tangents(costs.y, costs.closed)
+        d = t.shape[1]
+        metric = np.eye(d) - (1 - np.sqrt(_TANGENTIAL)) * t[:, :, None] * t[:, None, :]
+    sub_costs = replace(costs, repeat=final.repeat if sub_denser else np.inf, many=sub_denser)
+    return _Fit(sub_costs, sub, p.phi, p.freq, metric), final
+
+
+def _deformation(fit: _Fit, sim: Similarity, good: np.ndarray) -> np.ndarray:
+    """The smooth deformation (m, d) fitted to the residuals of the trusted pairs."""
+    rows, x, y = good[:, 0], fit.costs.x, fit.costs.y
+    resid = y[good[:, 1]] - sim.apply(x[rows])
+    return _modal_deformation(fit.phi, fit.freq, sim.rotation, rows, resid, _STIFF,
+                              None if fit.metric is None else fit.metric[good[:, 1]])
+
+
+def _alternate(fit: _Fit, sim: Similarity, rotate: bool) -> np.ndarray:
+    """Alternate the search on the source nodes ``fit.sub`` with Horn's alignment
+    (rotation only when ``rotate``): ``_RIGID`` rounds, then up to ``_DEFORM_ROUNDS`` with
+    a smooth deformation in the source's lowest modes fitted to the trusted pairs too.
+    The fits depend on the trusted pairs alone, so the same pairs twice running are a
+    fixed point: it ends the rigid rounds (the deformation starts from it) and the
+    deformation rounds after their first. Returns where the fitted similarity and
+    deformation take every source node, (m, d), target frame."""
+    x, y = fit.costs.x, fit.costs.y
+    good = previous = None
+    for _ in range(_RIGID):
+        good, _ = _trusted_pairs(fit.costs, sim.apply(x), fit.sub)
+        if previous is not None and np.array_equal(good, previous):
+            break
+        previous, good = good, None
+        sim = align(x[previous[:, 0]], y[previous[:, 1]], rotate=rotate)
+    shift = np.zeros_like(x)
+    for r in range(_DEFORM_ROUNDS):
+        if good is None:
+            good, _ = _trusted_pairs(fit.costs, sim.apply(x) + shift, fit.sub)
+        if r and np.array_equal(good, previous):
+            break
+        previous, good = good, None
+        sim = align(x[previous[:, 0]], y[previous[:, 1]], rotate=rotate)
+        shift = _deformation(fit, sim, previous)
+    return sim.apply(x) + shift
+
+
+def _keep_or_turn(fit: _Fit, final: _Costs, z: np.ndarray, turned: Similarity
+                  ) -> np.ndarray:
+    """The common frame won the pose search although a turned pose cost less: the
+    alternation from the turned pose replaces ``z`` only if it lowers the objective below
+    ``_TURN_GAIN`` of its own (a shape turned by 5-45 degrees)."""
+    free = _alternate(fit, turned, True)
+    return free if _objective(final, free) < _TURN_GAIN * _objective(final, z) else z
+
+
+def _final_pairs(final: _Costs, z: np.ndarray, reject: float):
+    """The search on every source node placed at ``z``; pairs costing more than
+    ``reject`` dropped and, on a closed target, those that would go round it twice.
+    Returns the pairs (target indices in search order) and their costs."""
+    pairs, C = _search(final, z, np.arange(len(z)))
     cost = C[pairs[:, 0], pairs[:, 1]]
     keep = cost <= reject
-    if closed:  # partners round the target once: none crossing at the cut or a step back
-        keep &= _untangle(pairs[:, 1], cost, n, opt["skip"], strict=not denser)
-    pairs, cost = pairs[keep], cost[keep]
+    if final.closed:  # partners round the target once: none crossing at the cut or a step back
+        keep &= _untangle(pairs[:, 1], cost, len(final.y), _SKIP, strict=not final.many)
+    return pairs[keep], cost[keep]
+
+
+def _match_auto(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
+                ) -> tuple[np.ndarray, np.ndarray, Similarity, np.ndarray]:
+    """The default matcher; also returns where the fitted similarity and deformation take
+    every source node (the target's user coordinates), shape (m, d)."""
+    p = _prepare(src, tgt, n_modes, opts.sigma, opts.rotation)
+    sub = spread_indices(src, ALTERNATION_NODES)
+    costs = _Costs(src.normalized, tgt.normalized, p.F, tgt.spacing**2, p.ordered, p.closed)
+    pose = _contour_pose(p) if p.ordered else _cloud_pose(p, costs, sub)
+    order = np.arange(tgt.m)[::-1] if pose.reverse else np.arange(tgt.m)
+    costs = replace(costs, y=costs.y[order], F=costs.F[:, order])
+    fit, final = _fits(p, pose, costs, sub)
+    z = _alternate(fit, pose.sim, pose.rotate)
+    if opts.rotation == "auto" and pose.common:
+        z = _keep_or_turn(fit, final, z, pose.turned)
+    pairs, cost = _final_pairs(final, z, _REJECT if opts.reject is None else opts.reject)
     pairs = np.c_[pairs[:, 0], order[pairs[:, 1]]]
-    landed = tgt.to_user(z)  # where the fitted similarity and deformation take the source
+    landed = tgt.to_user(z)
     return pairs, cost, align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]]), landed
 
 
-def _match_large(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: float,
-                 coarse: int, *, rotation: str = "auto"
+def _match_large(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
                  ) -> tuple[np.ndarray, np.ndarray, Similarity, np.ndarray]:
     """The default matcher for large objects, in memory linear in the node counts.
 
-    Both objects are matched on ``coarse`` nodes spread evenly over them; every source
+    Both objects are matched on ``COARSE`` nodes spread evenly over them; every source
     node is then carried by the fitted similarity and deformation of its nearest coarse
     nodes (inverse-distance weights) and paired with the target node nearest to where it
     lands (k-d trees); pairs farther than ``sqrt(reject)`` coarse target spacings are
@@ -695,10 +800,10 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: flo
     along a contour, not one node of the dense sampling. Also returns where every source
     node lands (the target's user coordinates), shape (m, d).
     """
-    ci, cj = spread_indices(src, coarse), spread_indices(tgt, coarse)
+    ci, cj = spread_indices(src, COARSE), spread_indices(tgt, COARSE)
     sub_s = Shape(src.points[ci], closed=src.closed, ordered=src.ordered)
     sub_t = Shape(tgt.points[cj], closed=tgt.closed, ordered=tgt.ordered)
-    *_, landed_c = _match_auto(sub_s, sub_t, n_modes, sigma, reject, rotation=rotation)
+    *_, landed_c = _match_auto(sub_s, sub_t, n_modes, opts)
     dist, near = cKDTree(sub_s.points).query(src.points, k=4)
     w = 1.0 / np.maximum(dist, 1e-12 * src.size)
     w /= w.sum(axis=1, keepdims=True)
@@ -707,33 +812,60 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, sigma: float, reject: flo
     gap = np.linalg.norm(tgt.points[j] - landed, axis=1)
     h = tgt.spacing * tgt.size * tgt.m / len(cj)  # the coarse target's node spacing
     cost = (gap / h) ** 2  # in squared coarse target spacings, as on the coarse level
-    keep = cost <= reject
+    keep = cost <= (_REJECT if opts.reject is None else opts.reject)
     pairs = np.c_[np.flatnonzero(keep), j[keep]]
     return pairs, cost[keep], align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]]), landed
 
 
-def _match_cloud(src: Shape, tgt: Shape, n_modes: int, sigma: float | None, reject: float,
-                 rotation: str) -> tuple[np.ndarray, np.ndarray, Similarity]:
+def _match_cloud(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
+                 ) -> tuple[np.ndarray, np.ndarray, Similarity]:
     """The default matcher for unordered 3D point sets: the modal matcher (on ``COARSE``
     nodes for large objects), then :func:`modalmorph.match3d.refine`, then each source
     node paired with the target node nearest to where it lands; pairs farther than
     ``sqrt(reject)`` target spacings are dropped. Cost in squared target spacings."""
-    if max(src.m, tgt.m) > LARGE:
-        *_, landed = _match_large(src, tgt, n_modes, sigma, reject, COARSE, rotation=rotation)
-    else:
-        *_, landed = _match_auto(src, tgt, n_modes, sigma, reject, rotation=rotation)
+    large = max(src.m, tgt.m) > LARGE
+    *_, landed = (_match_large if large else _match_auto)(src, tgt, n_modes, opts)
     y = tgt.normalized
     z = refine(src.normalized, tgt.to_normalized(landed), y, min(src.m, COARSE) // 4)
     gap, j = cKDTree(y).query(z)
     cost = (gap / tgt.spacing) ** 2
-    keep = cost <= reject
+    keep = cost <= (_REJECT if opts.reject is None else opts.reject)
     pairs = np.c_[np.flatnonzero(keep), j[keep]]
     return pairs, cost[keep], align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]])
 
 
-def match(source, target, *, method: str = "auto", rotation: str = "auto",
-          modes: int | None = None, sigma: float | None = None,
-          reject: float | None = None) -> Matching:
+def _match_paper(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions):
+    """The paper's searches over the affinity (8): ``"local"`` or ``"global"``."""
+    if src.m * tgt.m > MAX_AFFINITY:
+        raise ShapeError(f"method={opts.method!r} builds the full {src.m} x {tgt.m} "
+                         f"affinity matrix (8), too large here; use method='auto', which "
+                         f"matches large objects in linear memory")
+    phi1, _ = modal_features(src, n_modes, sigma=opts.sigma)
+    phi2, _ = modal_features(tgt, n_modes, sigma=opts.sigma)
+    Z = affinity(phi1, _fix_signs(phi1, phi2))  # (8)
+    if opts.method == "local":
+        pairs = _mutual_best(Z)
+    else:
+        r, c = linear_sum_assignment(Z)
+        pairs = np.c_[r, c][_reject(Z[r, c], 3.0 if opts.reject is None else opts.reject)]
+    return pairs, Z[pairs[:, 0], pairs[:, 1]], None
+
+
+def _shapes(source, target) -> tuple[Shape, Shape]:
+    """Both objects as shapes of one dimension; a closed contour must have an area."""
+    src, tgt = as_shape(source, "source"), as_shape(target, "target")
+    for name, shape in (("source", src), ("target", tgt)):
+        if shape.dim == 2 and shape.ordered and shape.closed and (
+                abs(area(shape.normalized)) < FLAT_AREA):
+            raise ShapeError(f"{name} is a closed contour with no area (its nodes lie on "
+                             f"one line): pass it as Shape(points, closed=False)")
+    if src.dim != tgt.dim:
+        raise ShapeError(f"source and target must have the same dimension, got "
+                         f"{src.dim}D and {tgt.dim}D")
+    return src, tgt
+
+
+def match(source, target, *, options: MatchOptions | None = None, **overrides) -> Matching:
     """Correspondences between the nodes of two objects by modal matching (6)-(8).
 
     Parameters
@@ -743,33 +875,15 @@ def match(source, target, *, method: str = "auto", rotation: str = "auto",
         Arrays become :class:`Shape` with its defaults (2D: closed ordered contour; 3D:
         unordered point cloud); pass a ``Shape`` for an open contour (``closed=False``)
         or an unordered 2D set (``ordered=False``).
-    method : {"auto", "local", "global"}, optional
-        ``"local"``: mutual best in the affinity ``Z`` (8), the paper's search.
-        ``"global"``: assignment over ``Z`` with rejection of implausible pairs.
-        ``"auto"`` (default): pose-invariant modal signatures plus position, alternated
-        with Horn's alignment and a deformation in the lowest modes; order-preserving
-        (cyclic) search for contours, assignment for point clouds. Invariant to
-        translation, rotation, scale, start node and direction of a contour.
-    rotation : {"auto", "free", "none"}, optional
-        How the ``"auto"`` search treats the objects' relative orientation.
-        ``"none"``: the objects share one frame (frames of a sequence, end-diastole and
-        end-systole of one image slice): the correspondence is not rotated at all, only
-        translated and scaled. ``"free"``: any rotation, the pose chosen by cost alone
-        (objects drawn in unrelated poses). ``"auto"`` (default): any rotation is tried,
-        but poses within 20 degrees of the given frame are kept unless another pose costs
-        clearly less: near-symmetric shapes (a left ventricle, a circle) keep their common
-        frame, a shape turned by a large angle is still found.
-    modes : int, optional
-        Number of lowest modes describing each node (default 24).
-    sigma : float or None, optional
-        Gaussian width of the matching models, x mean node spacing. ``None`` (default):
-        2, or less where the Gram matrix of a model would be ill-conditioned
-        (:func:`modalmorph.element.auto_sigma`, per model).
-    reject : float, optional
-        Pairs costing more than this are dropped. ``"global"``: a multiple of the median
-        pair cost (default 3). ``"auto"``: squared distance after the final alignment in
-        units of the target's squared node spacing (default 16, i.e. 4 spacings).
-        ``"local"`` rejects nothing.
+    options : MatchOptions, optional
+        ``method`` (``"auto"``: the default matcher, invariant to translation, rotation,
+        scale, start node and direction of a contour; ``"local"``, ``"global"``: the
+        paper's searches over the affinity (8)), ``rotation`` (for ``"auto"``: ``"none"``
+        when the objects share one frame, ``"free"`` for unrelated poses, ``"auto"`` to
+        keep the common frame unless another pose costs clearly less), ``modes``,
+        ``sigma`` and ``reject``: see :class:`~modalmorph.options.MatchOptions`.
+    **overrides
+        Fields of ``options`` by name, e.g. ``match(a, b, rotation="none")``.
 
     Returns
     -------
@@ -777,57 +891,28 @@ def match(source, target, *, method: str = "auto", rotation: str = "auto",
 
     Raises
     ------
-    ValueError
-        If an object is invalid (see :class:`Shape`), the dimensions differ, or an option
-        is out of range.
+    ShapeError
+        If an object is invalid (see :class:`Shape`) or the dimensions differ.
+    OptionError
+        If an option is unknown or out of range.
     """
-    src, tgt = as_shape(source, "source"), as_shape(target, "target")
-    for name, shape in (("source", src), ("target", tgt)):
-        if shape.dim == 2 and shape.ordered and shape.closed:
-            x, y = shape.normalized.T  # shoelace area, relative to the unit RMS radius
-            if abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))) < 1e-9:
-                raise ValueError(f"{name} is a closed contour with no area (its nodes lie on "
-                                 f"one line): pass it as Shape(points, closed=False)")
-    if src.dim != tgt.dim:
-        raise ValueError(f"source and target must have the same dimension, got "
-                         f"{src.dim}D and {tgt.dim}D")
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-    if modes is not None and (not isinstance(modes, int | np.integer) or modes < 1):
-        raise ValueError(f"modes must be a positive integer, got {modes!r}")
-    n_modes = DEFAULT_MODES if modes is None else int(modes)
+    if options is None:
+        options = MatchOptions()
+    elif not isinstance(options, MatchOptions):
+        raise OptionError(f"options must be a MatchOptions, got {type(options).__name__}")
+    opts = options.replace(**overrides) if overrides else options
+    src, tgt = _shapes(source, target)
+    n_modes = DEFAULT_MODES if opts.modes is None else int(opts.modes)
     n_modes = min(n_modes, src.dim * min(src.m, tgt.m, MAX_MODEL_NODES))
-    check_sigma(sigma)
-    if rotation not in ROTATIONS:
-        raise ValueError(f"rotation must be one of {ROTATIONS}, got {rotation!r}")
-    if reject is not None and not reject > 0:
-        raise ValueError(f"reject must be > 0, got {reject}")
-    sim = None
-    reject_auto = _REJECT if reject is None else reject
-    if method == "auto" and src.dim == 3 and not (src.ordered or tgt.ordered):
-        pairs, cost, sim = _match_cloud(src, tgt, n_modes, sigma, reject_auto, rotation)
-    elif method == "auto" and max(src.m, tgt.m) > LARGE:
-        pairs, cost, sim, _ = _match_large(src, tgt, n_modes, sigma, reject_auto, COARSE,
-                                           rotation=rotation)
-    elif method == "auto":
-        pairs, cost, sim, _ = _match_auto(src, tgt, n_modes, sigma, reject_auto,
-                                          rotation=rotation)
+    if opts.method != "auto":
+        pairs, cost, sim = _match_paper(src, tgt, n_modes, opts)
+    elif src.dim == 3 and not (src.ordered or tgt.ordered):
+        pairs, cost, sim = _match_cloud(src, tgt, n_modes, opts)
     else:
-        if src.m * tgt.m > MAX_AFFINITY:
-            raise ValueError(f"method={method!r} builds the full {src.m} x {tgt.m} affinity "
-                             f"matrix (8), too large here; use method='auto', which "
-                             f"matches large objects in linear memory")
-        phi1, _ = modal_features(src, n_modes, sigma=sigma)
-        phi2, _ = modal_features(tgt, n_modes, sigma=sigma)
-        Z = affinity(phi1, _fix_signs(phi1, phi2))  # (8)
-        if method == "local":
-            pairs = _mutual_best(Z)
-        else:
-            r, c = linear_sum_assignment(Z)
-            pairs = np.c_[r, c]
-            keep = _reject(Z[r, c], 3.0 if reject is None else reject)
-            pairs = pairs[keep]
-        cost = Z[pairs[:, 0], pairs[:, 1]]
+        large = max(src.m, tgt.m) > LARGE
+        pairs, cost, sim, _ = (_match_large if large else _match_auto)(src, tgt, n_modes,
+                                                                       opts)
     order = np.argsort(pairs[:, 0], kind="stable")
-    return Matching(pairs=pairs[order].astype(np.intp), cost=cost[order], method=method,
-                    modes=n_modes, sigma=sigma, similarity=sim, shape=(src.m, tgt.m))
+    return Matching(pairs=pairs[order].astype(np.intp), cost=cost[order], method=opts.method,
+                    modes=n_modes, sigma=opts.sigma, similarity=sim, shape=(src.m, tgt.m),
+                    options=opts)

@@ -89,7 +89,7 @@ unmatched, neighbours
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, fields
+from dataclasses import fields
 
 from .align import align
 from .errors import MorphDivergedError, OptionError, ShapeError
@@ -153,7 +153,7 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
                          f"{src.dim}D and {tgt.dim}D")
     options, match_options = _options(options, matching, overrides)
     if matching is None or isinstance(matching, MatchOptions):
-        matching = match(src, tgt, **asdict(match_options))
+        matching = match(src, tgt, options=match_options)
     else:
         match_options = getattr(matching, "options", None)
     pairs = check_pairs(matching, src.m, tgt.m)

@@ -1,8 +1,8 @@
 """Quality measures of a morph: distances between curves, self-crossings, roughness and
 the rotation a correspondence implies.
 
-These measure a result; nothing in the method depends on them. They are fast enough to run
-on every time step of a morph (see ``benchmarks/realdata.py``, which uses all four).
+These measure a result (the matcher uses only :func:`area`, to refuse a flat contour). They
+are fast enough to run on every time step of a morph (see ``benchmarks/realdata.py``).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from scipy.spatial import cKDTree
 from .align import align
 from .shape import resample
 
-__all__ = ["Polyline", "correspondence_rotation", "curve_distances", "roughness",
+__all__ = ["Polyline", "area", "correspondence_rotation", "curve_distances", "roughness",
            "self_crossings"]
 
 # Nearest vertices whose adjacent segments are tested first in curve_distances; the rest is
@@ -39,6 +39,13 @@ def _points(points, name: str, dims=(2, 3)) -> np.ndarray:
     if not np.isfinite(p).all():
         raise ValueError(f"{name} must be finite (no NaN or inf)")
     return p
+
+
+def area(points) -> float:
+    """Signed shoelace area of a closed polygon (m, 2): positive when its nodes run
+    counter-clockwise in its axes."""
+    x, y = _points(points, "points", dims=(2,)).T
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
 
 
 def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -177,7 +177,7 @@ def _read_kwargs(read: ReadOptions) -> dict:
 def compute_morph(source, target, settings: Settings, *, progress=None):
     """:func:`modalmorph.match` then :func:`modalmorph.morph` with the settings."""
     with blas_threads(max(source.m, target.m)):
-        matching = match(source, target, **settings.match.record())
+        matching = match(source, target, options=settings.match)
         return morph(source, target, matching=matching,
                      remove_rigid=settings.align.remove_rigid, options=settings.morph,
                      progress=progress)

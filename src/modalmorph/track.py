@@ -195,7 +195,7 @@ def _morph_frame(source: Shape, target: Shape, f: int, *, names: tuple,
     options, remove_rigid = morph_options
     try:
         pairs = (_nearest_pairs(source.normalized, target.normalized)
-                 if match_options is None else match(source, target, **asdict(match_options)))
+                 if match_options is None else match(source, target, options=match_options))
         return morph(source, target, matching=pairs, remove_rigid=remove_rigid,
                      options=options)
     except (ValueError, MorphDivergedError) as exc:
