@@ -5,8 +5,6 @@ between objects by a physical methodology", with Sclaroff's Gaussian finite elem
 modal matching, Horn alignment, Lagrange's dynamic equilibrium and strain energy.
 """
 
-__version__ = "0.1.0"
-
 from .align import Similarity, align
 from .element import DEFAULT_SIGMA
 from .errors import MorphDivergedError
@@ -20,6 +18,7 @@ from .pipeline import Morph, morph
 from .shape import Shape, resample
 from .simulation import Simulation
 from .track import Track, TrackOptions, track
+from .version import __version__
 
 __all__ = [
     "DEFAULT_SIGMA",

@@ -18,7 +18,7 @@ import time
 import warnings
 from pathlib import Path
 
-from . import __version__, batch
+from . import batch
 from .app import serve
 from .datasets import hand_shape, heart_shape
 from .errors import MorphDivergedError, OptionError
@@ -39,6 +39,7 @@ from .runs import (
     track_files,
     write_morph,
 )
+from .version import __version__
 
 __all__ = ["main", "build_parser", "add_option_flags", "flag_help", "load_config",
            "EXIT_CODES"]

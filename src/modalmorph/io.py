@@ -80,7 +80,9 @@ from pathlib import Path
 import numpy as np
 
 from .options import OBJECTS
+from .quality import area
 from .shape import ImageFrame, Shape, resample
+from .version import __version__
 
 __all__ = [
     "DEFAULT_NODES",
@@ -652,9 +654,9 @@ def _image_contour(grey: np.ndarray, name: str, threshold: float | None,
     chosen = _choose_object(_image_mask(grey, name, threshold), choice, name)
     padded = np.pad(chosen, 1).astype(np.float64)  # closes contours at the image's edge
     contours = find_contours(padded, 0.5)
-    best = contours[int(np.argmax([abs(_signed_area(c)) for c in contours]))]  # the outer
+    best = contours[int(np.argmax([abs(area(c)) for c in contours]))]  # the outer
     pts = best[:-1, ::-1] - 1.0  # (row, col) -> (x, y); drop the closing repeat
-    if _signed_area(pts) < 0:
+    if area(pts) < 0:
         pts = pts[::-1]  # one orientation for every image: positive area in (x, y)
     return pts
 
@@ -741,12 +743,6 @@ def _alpha_mask(alpha: np.ndarray, name: str) -> np.ndarray | None:
               "transparent); reading the grey levels", name, n_opaque, alpha.size,
               100 * partial)
     return None
-
-
-def _signed_area(pts: np.ndarray) -> float:
-    """Shoelace area of a closed polygon, positive when counter-clockwise in its axes."""
-    x, y = pts[:, 0], pts[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
 
 
 # -- meshes -----------------------------------------------------------------------------
@@ -961,7 +957,7 @@ def result_summary(morph, *, params: dict, options: dict | None = None,
           "energy": [float, ...]          # T + 1 values, strain energy per step
         }
     """
-    from . import __version__
+
 
     return {
         "modalmorph_version": __version__,
@@ -1392,7 +1388,7 @@ def save_track(track, out_dir, *, options: dict | None = None,
     ``strain_segments.csv``
         One row per frame: ``frame,global,segment_1,...,segment_S``.
     """
-    from . import __version__
+
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
