@@ -21,11 +21,10 @@ from numpy.testing import assert_allclose
 
 from modalmorph import morph
 from modalmorph.app import MAX_UPLOAD, make_server, morph_options, parse_options
-from modalmorph.datasets import load_heart
+from modalmorph.datasets import heart_shape
 from modalmorph.options import flat_fields
 from modalmorph.report import result_payload, write_html
 from modalmorph.runs import FORM_CLASSES
-from modalmorph.shape import Shape
 
 # Coordinates travel as JSON doubles and SVG attributes (shortest round-trip text):
 # exact; the margin covers a different BLAS summation order between two runs.
@@ -234,7 +233,7 @@ def browser(downloads):
 
 @pytest.fixture(scope="module")
 def heart_result():
-    return morph(Shape(load_heart("diastole")), Shape(load_heart("systole")), **HEART_OPTIONS)
+    return morph(heart_shape("diastole"), heart_shape("systole"), **HEART_OPTIONS)
 
 
 def _wait(browser, condition, what: str):

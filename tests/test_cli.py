@@ -340,8 +340,9 @@ def test_status_sentence_and_a_progress_bar_that_ends_at_100(hand_csvs, tmp_path
     assert re.search(r"morphing: step (\d+).*100%", text), text[-500:]
     status = [line for line in text.splitlines() if " matches; " in line]
     assert len(status) == 1
-    assert re.search(r"80 -> 90 nodes, \d+ matches; converged after \d+ steps: .*input "
-                        r"units\); \d+\.\d s$", status[0]), status
+    assert re.search(r"80 -> 90 nodes, \d+ matches; converged after \d+ steps, [\d.]+ input "
+                     r"units from the target \(tolerance [\d.]+ input units\); \d+\.\d s$",
+                     status[0]), status
 
 
 def test_mp4_without_ffmpeg_fails_before_any_computation(hand_csvs, tmp_path, capsys,

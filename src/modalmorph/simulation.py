@@ -365,8 +365,9 @@ class Simulation:
         dist = self._dist
         if self._two_way and not converged:  # measured both ways at the end in any case
             dist = self._distance(self._near[-1], lazy=False)
+        frame = self.target.frame
         stop = _stop_sentence(self.reason, self.steps, dist * size, self._tol_n * size,
-                              self._two_way)
+                              "input units" if frame is None else frame.unit)
         if not converged:
             log.info("morph stopped without reaching the tolerance: %s", stop)
         return Morph(shapes=np.array(self._shapes), loads=np.array(self._forces),
@@ -445,13 +446,12 @@ def _nodes(u: np.ndarray, d: int) -> np.ndarray:
     return u.reshape(d, -1).T
 
 
-def _stop_sentence(reason: str, steps: int, final: float, tol: float, two_way: bool) -> str:
-    """``stop_reason``: one short sentence with the distance and its tolerance."""
-    what = ("mean distance of the matched nodes and both ways" if two_way else
-            "mean distance of the matched nodes")
-    where = f"{final:.3g} from the target ({what}; tolerance {tol:.3g}, input units)"
+def _stop_sentence(reason: str, steps: int, final: float, tol: float, unit: str) -> str:
+    """``stop_reason``: one short sentence with the distance (:attr:`Morph.distance`)
+    and its tolerance, in the target's unit."""
+    where = f"{final:.3g} {unit} from the target (tolerance {tol:.3g} {unit})"
     if reason == "tolerance":
-        return f"converged after {steps} steps: {where}"
+        return f"converged after {steps} steps, {where}"
     if reason == "equilibrium":
         return f"stopped at equilibrium after {steps} steps, {where}"
     return f"stopped at max_steps={steps}, {where}"
