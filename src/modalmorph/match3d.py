@@ -16,12 +16,19 @@ transport plans).
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
+from scipy.sparse import coo_matrix, csr_matrix, diags
 from scipy.spatial import cKDTree
 
 __all__ = ["refine"]
 
-_ROUNDS = 3  # transport and smoothing rounds per level
+_ROUNDS = 3  # transport and smoothing rounds of the last level (the nodes themselves)
+# Rounds of each coarser level (cheap: few cubes, operators built once per level), and the
+# over-relaxation of every move. Measured on the 100 000-point blob turned 90 degrees
+# (median pair error, spacings; refinement time): 3 rounds x1 3.67, 10.3 s ... 10 rounds
+# 2.91, 30 rounds 1.71 (23 s); 15 x2 1.71 (13.5 s), 30 x2 1.52 (23 s); x3 diverged.
+# Started at the truth, 30 x2 drifts 0.29 spacing (3 x1: 0.12).
+_COARSE_ROUNDS = 30
+_OVERRELAX = 2.0
 _NEIGHBOURS = 16  # nearest nodes: controls per node, and edges of the transport graph
 _SINKHORN = 30  # scaling iterations of the transport
 _TEMPERATURE = 0.5  # width of the transport's Gaussian, x the level's cube width
@@ -44,30 +51,28 @@ def _means(label: np.ndarray, p: np.ndarray, weight: np.ndarray | None = None
         / total[:, None], total
 
 
-def _smooth(xc: np.ndarray, mass: np.ndarray, resid: np.ndarray, x: np.ndarray,
-            width: float) -> np.ndarray:
-    """A displacement field over every node ``x`` (m, 3), Gaussian-smoothed (width
-    ``width``) from the residuals ``resid`` (k, 3) at the points ``xc`` of masses ``mass``:
+def _smoother(xc: np.ndarray, mass: np.ndarray, x: np.ndarray, width: float):
+    """The linear map from residuals at the points ``xc`` (k, 3) of masses ``mass`` to a
+    displacement field over every node ``x`` (m, 3), Gaussian-smoothed (width ``width``):
     the residuals are averaged onto control points ``width`` apart, and every node takes
     the Gaussian-weighted mean of its nearest controls (the kernel of Sclaroff's element
-    (1))."""
+    (1)). Returned as a function of the residuals (k, 3)."""
     c, _ = _means(_cells(xc, width), xc, mass)
     k = min(_NEIGHBOURS, len(c))
     tree = cKDTree(c)
 
-    def weights(p):
+    def weights(p, scale):
         dist, near = tree.query(p, k=k)
         dist, near = dist.reshape(len(p), k), near.reshape(len(p), k)
         w = np.exp(-0.5 * (dist / width) ** 2)
-        return w / w.sum(axis=1, keepdims=True), near
+        w *= scale[:, None] / w.sum(axis=1, keepdims=True)
+        return csr_matrix((w.ravel(), near.ravel(), np.arange(0, len(p) * k + 1, k)),
+                          shape=(len(p), len(c)))
 
-    w, near = weights(xc)
-    flat, wr = near.ravel(), (w * mass[:, None]).ravel()
-    tot = np.bincount(flat, wr, minlength=len(c))
-    ctrl = np.stack([np.bincount(flat, wr * np.repeat(resid[:, a], k), minlength=len(c))
-                     for a in range(3)], axis=1) / np.maximum(tot, 1e-12)[:, None]
-    w, near = weights(x)
-    return np.einsum("ik,ika->ia", w, ctrl[near])
+    gather = weights(xc, mass).T.tocsr()  # controls x points
+    gather = diags(1.0 / np.maximum(np.asarray(gather.sum(axis=1)).ravel(), 1e-12)) @ gather
+    spread = weights(x, np.ones(len(x)))
+    return lambda resid: spread @ (gather @ resid)
 
 
 def _transport(z: np.ndarray, mu: np.ndarray, y: np.ndarray, nu: np.ndarray,
@@ -104,8 +109,9 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndarra
     each level the source's nodes are summarised in the same cubes of their own frame
     ``x`` (so a cube's nodes stay together as they move), put in transport with the
     target's (:func:`_transport`), and the move of each summary towards its share is
-    smoothed over the source (:func:`_smooth`) with a width of a few cubes and applied
-    to every node.
+    smoothed over the source (:func:`_smoother`) with a width of a few cubes and applied
+    to every node, over-relaxed; many rounds on the coarse levels (cheap), few on the
+    nodes themselves.
 
     Parameters
     ----------
@@ -126,18 +132,18 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndarra
     m, n = len(x), len(y)
     spacing = cKDTree(y).query(y, k=2)[0][:, 1].mean()
     width = spacing * np.sqrt(n / start)
-    while width > spacing:
+    while True:
         width = max(width / _STEP, spacing)
-        last = width == spacing
-        for _ in range(_ROUNDS):
-            if last:
-                xc, zc, mu, yc, nu = x, z, np.ones(m), y, np.full(n, m / n)
-            else:
-                label = _cells(x, width)
-                zc, mu = _means(label, z)
-                xc, _ = _means(label, x)
-                yc, nu = _means(_cells(y, width), y)
-                nu *= m / n
-            goal = _transport(zc, mu, yc, nu, _TEMPERATURE * width)
-            z = z + _smooth(xc, mu, goal - zc, x, _WIDTH * width)
-    return z
+        if width == spacing:
+            label, xc, mu, yc, nu = np.arange(m), x, np.ones(m), y, np.full(n, m / n)
+        else:
+            label = _cells(x, width)
+            xc, mu = _means(label, x)
+            yc, nu = _means(_cells(y, width), y)
+            nu *= m / n
+        smooth = _smoother(xc, mu, x, _WIDTH * width)
+        for _ in range(_ROUNDS if width == spacing else _COARSE_ROUNDS):
+            zc = z if width == spacing else _means(label, z)[0]
+            z = z + _OVERRELAX * smooth(_transport(zc, mu, yc, nu, _TEMPERATURE * width) - zc)
+        if width == spacing:
+            return z
