@@ -22,12 +22,14 @@ from scipy.spatial import cKDTree
 __all__ = ["refine"]
 
 _ROUNDS = 3  # transport and smoothing rounds of the last level (the nodes themselves)
-# Rounds of each coarser level (cheap: few cubes, operators built once per level), and the
-# over-relaxation of every move. Measured on the 100 000-point blob turned 90 degrees
-# (median pair error, spacings; refinement time): 3 rounds x1 3.67, 10.3 s ... 10 rounds
-# 2.91, 30 rounds 1.71 (23 s); 15 x2 1.71 (13.5 s), 30 x2 1.52 (23 s); x3 diverged.
-# Started at the truth, 30 x2 drifts 0.29 spacing (3 x1: 0.12).
-_COARSE_ROUNDS = 30
+# Rounds of each coarser level (operators built once per level), many where the level has
+# fewer cubes than _FEW x the source nodes (cheap), fewer above; and the over-relaxation of
+# every move. Measured on the 100 000-point blob turned 90 degrees (median pair error,
+# spacings; refinement time): 3 rounds x1 3.67 (10 s); 10 x1 2.91; 30 x1 1.71 (23 s);
+# 15 x2 1.71 (13.5 s); 30 x2 1.52 (23 s); x3 diverged; 60 / 10 x2 1.49 (13 s), 90 / 5 x2
+# 1.49. Started at the truth, 30 x2 drifts 0.29 spacing (3 x1: 0.12).
+_FEW = 0.25
+_COARSE_ROUNDS = (60, 10)
 _OVERRELAX = 2.0
 _NEIGHBOURS = 16  # nearest nodes: controls per node, and edges of the transport graph
 _SINKHORN = 30  # scaling iterations of the transport
@@ -142,7 +144,8 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndarra
             yc, nu = _means(_cells(y, width), y)
             nu *= m / n
         smooth = _smoother(xc, mu, x, _WIDTH * width)
-        for _ in range(_ROUNDS if width == spacing else _COARSE_ROUNDS):
+        rounds = _ROUNDS if width == spacing else _COARSE_ROUNDS[len(mu) >= _FEW * m]
+        for _ in range(rounds):
             zc = z if width == spacing else _means(label, z)[0]
             z = z + _OVERRELAX * smooth(_transport(zc, mu, yc, nu, _TEMPERATURE * width) - zc)
         if width == spacing:
