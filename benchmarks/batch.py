@@ -29,11 +29,12 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from modalmorph.batch import Item, run  # noqa: E402
-from modalmorph.cli import morph_files  # noqa: E402
+from modalmorph.batch import Engine, Item, run  # noqa: E402
 from modalmorph.datasets import load_heart  # noqa: E402
 from modalmorph.matching import match  # noqa: E402
+from modalmorph.options import OutputOptions  # noqa: E402
 from modalmorph.pipeline import morph  # noqa: E402
+from modalmorph.runs import Settings, morph_files  # noqa: E402
 from modalmorph.shape import Shape  # noqa: E402
 
 
@@ -82,14 +83,15 @@ def main():
     loop = compute
     row("computation only, in a loop", wall, compute)
     _, wall, loop = timed(lambda: [morph_files(
-        item.source, item.target, work / "loop" / item.id, {}, figures=False, gif=False)
+        item.source, item.target, work / "loop" / item.id,
+        Settings(output=OutputOptions(figures=False, gif=False)))
         for item in items])
     row("morph_files in a loop (= morph CLI)", wall, loop)
     for engine in args.engines:
         walls = []
         for workers in (1, 2):
             done, wall, cpu = timed(run, items, work / f"{engine}-{workers}",
-                                    workers=workers, engine=engine)
+                                    engine=Engine(engine, workers=workers))
             walls.append(wall)
             assert all(r.status == "ok" for r in done.results), done.results[0]
             inside = np.mean([r.seconds for r in done.results])  # wall s of one item there

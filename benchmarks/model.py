@@ -60,10 +60,10 @@ def time_case(points: np.ndarray, n: int | None, solver: str, repeat: int,
     """Time one model: build, M and K (when ``matrices``), and ``modes(n)``."""
     def build():
         model = FEModel(points, solver=solver)
-        if model.solver == "dense":
-            _ = model.gram, model.stiffness_gaussian
-        else:
+        if model.truncated:
             _ = model.gram_sparse, model.stiffness_gaussian_sparse
+        else:
+            _ = model.gram, model.stiffness_gaussian
         return model
 
     row = {"m": len(points), "d": points.shape[1], "solver": solver}

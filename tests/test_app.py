@@ -21,9 +21,10 @@ from numpy.testing import assert_allclose
 
 from modalmorph import morph
 from modalmorph.app import MAX_UPLOAD, make_server, morph_options, parse_options
-from modalmorph.datasets import load_heart
+from modalmorph.datasets import heart_shape
+from modalmorph.options import flat_fields
 from modalmorph.report import result_payload, write_html
-from modalmorph.shape import Shape
+from modalmorph.runs import FORM_CLASSES
 
 # Coordinates travel as JSON doubles and SVG attributes (shortest round-trip text):
 # exact; the margin covers a different BLAS summation order between two runs.
@@ -36,31 +37,34 @@ WAIT = 60  # seconds: the longest wait for the page (the heart morph takes ~2 s)
 # ------------------------------------------------------------------- without a browser
 
 
-def test_form_is_generated_from_morph_signature():
-    import inspect
-
+def test_form_is_generated_from_the_option_fields():
     names = [o["name"] for o in morph_options()]
-    expected = [n for n in inspect.signature(morph).parameters
-                if n not in ("source", "target", "matching", "progress")]
-    assert names == expected
+    assert names == [name for name, _, _ in flat_fields(FORM_CLASSES)]
+    assert {"method", "match_sigma", "k", "material", "remove_rigid"} <= set(names)
     spec = {o["name"]: o for o in morph_options()}
-    assert spec["k"]["default_text"] == "100"
+    assert spec["k"]["default_text"] == "100" and spec["k"]["default"] == 100.0
     assert spec["scheme"]["choices"] == ["implicit", "explicit"]
-    assert spec["remove_rigid"]["kind"] == "bool"
-    assert "polyethylene" in spec["material"]["choices"]
+    assert spec["remove_rigid"]["kind"] == "bool" and spec["remove_rigid"]["default"] is False
+    assert spec["material"]["kind"] == "text"
+    assert spec["material"]["default_text"] == "polyethylene"
+    assert spec["match_sigma"]["group"] == "matching"
     assert all(o["summary"] for o in morph_options())  # every option explains itself
+    json.dumps(morph_options(), allow_nan=False)  # the schema the page fetches
 
 
 def test_parse_options_reads_the_form():
-    kw = parse_options({"k": "50", "damping": "0.5, 1", "modes": "2/3", "sigma": "",
-                        "remove_rigid": True, "scheme": "explicit"})
-    assert kw == {"k": 50, "damping": (0.5, 1.0), "modes": pytest.approx(2 / 3),
-                  "remove_rigid": True, "scheme": "explicit"}
+    settings = parse_options({"k": "50", "damping": "0.5, 1", "modes": "2/3", "sigma": "",
+                              "remove_rigid": True, "scheme": "explicit",
+                              "material": "1e5 0.3 1000", "match_sigma": "1.5"})
+    assert settings.morph.k == 50 and settings.morph.damping == (0.5, 1.0)
+    assert settings.morph.modes == pytest.approx(2 / 3) and settings.morph.sigma is None
+    assert settings.align.remove_rigid and settings.morph.scheme == "explicit"
+    assert settings.morph.material.E == 1e5 and settings.match.sigma == 1.5
     with pytest.raises(ValueError, match="k must be a number, got 'abc'"):
         parse_options({"k": "abc"})
     with pytest.raises(ValueError, match="unknown option 'kk'"):
         parse_options({"kk": "1"})
-    with pytest.raises(ValueError, match="dt takes one number"):
+    with pytest.raises(ValueError, match="dt has the wrong type"):
         parse_options({"dt": "1 2"})
 
 
@@ -139,9 +143,10 @@ def test_upload_run_stop_and_download_over_http(server):
         assert status == 200 and len(shape["points"]) == 40 and shape["closed"]
         ids.append(shape["id"])
 
-    state = _finish(server, _run(server, *ids, {"k": "-1"}))
-    assert state["state"] == "error"
-    assert state["error"] == "k must be a positive number, got -1" and state["field"] == "k"
+    status, answer = _request(server, "POST", "/api/run", json.dumps(
+        {"source": ids[0], "target": ids[1], "options": {"k": "-1"}}).encode())
+    assert status == 400 and answer["field"] == "k"  # refused before any run
+    assert answer["error"].startswith("options: k must be a number in [1e-06, 1e+06]")
 
     # Stop: a run that would take 10^5 steps ends at the next step
     job = _run(server, *ids, {"k": "0.01", "dt": "0.001", "max_steps": "100000",
@@ -228,7 +233,7 @@ def browser(downloads):
 
 @pytest.fixture(scope="module")
 def heart_result():
-    return morph(Shape(load_heart("diastole")), Shape(load_heart("systole")), **HEART_OPTIONS)
+    return morph(heart_shape("diastole"), heart_shape("systole"), **HEART_OPTIONS)
 
 
 def _wait(browser, condition, what: str):
@@ -314,13 +319,18 @@ def test_app_in_browser(server, browser, downloads, heart_result, tmp_path):
     k.send_keys("-3")
     browser.find_element(By.ID, "run").click()
     _wait(browser, lambda b: _ready(b) == "error", "the refusal")
-    assert browser.find_element(By.ID, "run-msg").text == "k must be a positive number, got -3"
+    assert browser.find_element(By.ID, "run-msg").text.startswith(
+        "options: k must be a number in [1e-06, 1e+06]")
     assert "invalid" in browser.find_element(
         By.CSS_SELECTOR, '.field[data-name="k"]').get_attribute("class")
+    refused = browser.get_log("browser")  # the 400 answer is the only entry
+    assert len(refused) == 1 and "api/run" in refused[0]["message"], refused
 
     k.clear()
     k.send_keys(str(HEART_OPTIONS["k"]))
-    browser.find_element(By.ID, "opt-remove_rigid").click()
+    rigid = browser.find_element(By.ID, "opt-remove_rigid")
+    browser.execute_script("arguments[0].scrollIntoView({block: 'center'})", rigid)
+    rigid.click()
     browser.find_element(By.ID, "run").click()
     _wait(browser, lambda b: _ready(b) == "result", "the morph's result")
     assert browser.find_element(By.ID, "run-msg").text == heart_result.stop_reason
@@ -372,7 +382,7 @@ def test_morph_html_flag_writes_the_report(tmp_path, hearts):
         np.savetxt(tmp_path / name, points, delimiter=",", header="x,y", comments="")
     out = tmp_path / "out"
     assert main(["morph", str(tmp_path / "a.csv"), str(tmp_path / "b.csv"), "--out", str(out),
-                 "--html", "--no-figures", "--no-gif", "--max-steps", "3", "-q"]) == 0
+                 "--html", "--no-figures", "--no-gif", "--max-steps", "3", "-q"]) == 3
     text = (out / "report.html").read_text()
     data = json.loads(re.search(r'id="mm-data" type="application/json">(.*?)</script>',
                                 text).group(1))

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from modalmorph.batch import Item, read_manifest, run
+from modalmorph.batch import Engine, Item, read_manifest, run
 from modalmorph.cli import main
 from modalmorph.datasets import load_hands, load_heart
 
@@ -102,11 +102,11 @@ def test_dask_local_cluster_and_resume(data, tmp_path):
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=":0") as cluster, \
             distributed.Client(cluster) as client:
-        first = run(items, out, client=client)
+        first = run(items, out, engine=Engine(client=client))
         _check_batch(data, out)
         assert not first.ok and first.engine.startswith("Dask client")
         stamp = (out / "heart" / "result.json").stat().st_mtime_ns
-        second = run(items, out, client=client)
+        second = run(items, out, engine=Engine(client=client))
     assert [r.status for r in second.results] == ["skipped", "skipped", "failed", "skipped"]
     assert (out / "heart" / "result.json").stat().st_mtime_ns == stamp  # not rewritten
     assert [r.steps for r in second.results] == [r.steps for r in first.results]
@@ -207,3 +207,16 @@ def test_figures_all_and_summary(data, tmp_path):
     written = write_summary([row], tmp_path / "out", figure=True)
     assert (tmp_path / "out" / "summary.png") in written
     assert (tmp_path / "out" / "summary.png").stat().st_size > 0
+
+
+def test_batch_options_reach_the_items_and_a_short_run_exits_3(data, tmp_path, capsys):
+    (tmp_path / "m.toml").write_text(f'[[item]]\nid = "heart"\nsource = "{data / "ed.csv"}"\n'
+                                     f'target = "{data / "es.csv"}"\n')
+    out = tmp_path / "out"
+    code = main(["batch", str(tmp_path / "m.toml"), "--out", str(out), "--engine",
+                 "processes", "--workers", "1", "--max-steps", "1", "-q"])
+    assert code == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["modalmorph: warning: 1 items did not reach the tolerance: heart"]
+    result = json.loads((out / "heart" / "result.json").read_text())
+    assert result["steps"] == 1 and result["options"]["max_steps"] == 1

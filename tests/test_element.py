@@ -5,7 +5,13 @@ import pytest
 from numpy.testing import assert_allclose
 
 from modalmorph import POLYETHYLENE, FEModel, Material
-from modalmorph.element import gram_entries, stiffness_entries
+from modalmorph.element import (
+    gram_entries,
+    self_entries,
+    stiffness_component_pairs,
+    stiffness_components,
+    stiffness_entries,
+)
 
 from .conftest import sphere_points
 
@@ -51,6 +57,28 @@ def test_closed_forms_match_quadrature(d, n, rng):
     # quadrature error of the uniform trapezoid rule on Gaussians is far below 1e-10
     assert_allclose(gamma, gamma_q, rtol=1e-10, atol=1e-12 * np.abs(gamma_q).max())
     assert_allclose(K, K_q, rtol=1e-9, atol=1e-10 * np.abs(K_q).max())
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_stiffness_components_are_the_entries(d, rng):
+    r = rng.standard_normal((50, d))
+    blocks = stiffness_entries(r, 0.7, 2.0, 1.5)
+    comps, gamma = stiffness_components(r, 0.7, 2.0, 1.5)
+    for (a, b), v in zip(stiffness_component_pairs(d), comps, strict=True):
+        assert np.array_equal(v, blocks[:, a, b])  # the same operations
+        assert_allclose(v, blocks[:, b, a], rtol=1e-15)  # K^ab = K^ba up to the last bit
+    assert np.array_equal(gamma, gram_entries(r, 0.7)[1])
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_self_entries(d):
+    sigma, lam, mu = 0.7, 2.0, 1.5
+    k, gamma = self_entries(sigma, d, lam, mu)
+    V = (np.pi * sigma**2) ** (d / 2)
+    assert_allclose(gamma, V, rtol=1e-15)
+    assert_allclose(k, V / sigma**2 * ((lam + mu) / 2 + mu * d / 2), rtol=1e-14)
+    blocks = stiffness_entries(np.zeros((1, d)), sigma, lam, mu)[0]
+    assert_allclose(blocks, k * np.eye(d), rtol=1e-15, atol=0)  # isotropic at offset 0
 
 
 def test_gram_is_interpolation_basis(hand200):

@@ -124,7 +124,7 @@ def test_cli_on_corpus_files(corpus, tmp_path, capsys, monkeypatch, name):
     path = next(p for p in corpus if p.name == name)
     code = main(["morph", str(path), str(good), "--out", "X", "-q", "--no-gif"])
     err = capsys.readouterr().err.strip().splitlines()
-    assert code in (0, 2)
+    assert code in (0, 2, 3)  # 3: written, tolerance not reached
     if code == 2:
         assert len(err) == 1 and err[0].startswith("modalmorph: error: ")
         assert sorted(p.name for p in tmp_path.iterdir()) == ["good.csv"]
@@ -177,7 +177,7 @@ def test_killed_runs_leave_the_output_complete_or_absent(tmp_path):
     assert start(50, "X").wait(timeout=120) == 0
     whole = time.monotonic() - began
     ks, names = {50}, sorted(p.name for p in (tmp_path / "X").iterdir())
-    assert len(names) == 13  # result.json, shapes.npz, final_shape.csv, 5 figures x 2
+    assert len(names) == 8  # result.json, shapes.npz, final_shape.csv, 5 PNG figures
     # Seven moments spread over a whole run's time (start-up, reading, matching,
     # integrating, writing) and
     # three while the run is held before each step of its final move (the writer sleeps
@@ -387,8 +387,9 @@ def test_read_shape_options_fuzz(tmp_path_factory, nodes, threshold, closed):
 # by name before any work.
 @pytest.mark.parametrize("option, message", [
     ({"sigma": 1e300}, "sigma must be"), ({"sigma": 1e-300}, "sigma must be"),
-    ({"dt": 1e-300}, "dt must lie"), ({"c_x": 1e300}, "c_x must be"),
-    ({"k": 1e300}, "k must lie"), ({"equilibrium_tol": np.inf}, "equilibrium_tol must be"),
+    ({"dt": 1e-300}, "dt must be a number in"), ({"c_x": 1e300}, "c_x must be"),
+    ({"k": 1e300}, "k must be a number in"),
+    ({"equilibrium_tol": np.inf}, "equilibrium_tol must be"),
 ])
 def test_extreme_options_refused(option, message):
     source, target = np.random.default_rng(0).standard_normal((2, 8, 2))

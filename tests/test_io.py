@@ -24,7 +24,7 @@ from modalmorph.io import (
     save_result,
     write_points,
 )
-from modalmorph.shape import Shape
+from modalmorph.shape import ImageFrame, Shape
 
 # A small non-symmetric 2D contour (a pentagon-ish outline) and a 3D point set.
 SQUARE = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.5, 1.5], [0.0, 1.0]])
@@ -350,6 +350,98 @@ def test_image_with_varying_alpha_uses_it(tmp_path):
     _check_ellipse(read_shape(tmp_path / "alpha.png"), mask)
 
 
+def test_image_alpha_is_the_mask_only_when_it_is_one(tmp_path):
+    from PIL import Image
+
+    mask = _ellipse_mask()
+    grey = (mask * 255).astype(np.uint8)
+    for name, alpha in (
+        ("opaque", np.full(mask.shape, 255)),  # uniformly opaque: the grey levels
+        ("stray", np.where(np.arange(mask.size).reshape(mask.shape) < 4, 0, 255)),  # 4 px
+        ("soft", np.linspace(60, 250, mask.size).reshape(mask.shape)),  # a gradient
+    ):
+        rgba = np.dstack([grey, grey, grey, alpha.astype(np.uint8)])
+        Image.fromarray(rgba).save(tmp_path / f"{name}.png")
+        _check_ellipse(read_shape(tmp_path / f"{name}.png"), mask)
+    # a cut-out with an antialiased edge: the alpha is the mask, whatever the colours
+    rgba = np.dstack([np.full(mask.shape, 90, np.uint8)] * 3 + [grey])
+    top = mask.nonzero()[0][0]
+    rgba[top, mask[top], 3] = 200  # the object's top row partly transparent (an edge)
+    Image.fromarray(rgba).save(tmp_path / "cutout.png")
+    _check_ellipse(read_shape(tmp_path / "cutout.png"), mask)
+
+
+def _objects_image(tmp_path):
+    """An 80 x 120 mask: a strip along the left border (2400 px), a disc inside (r = 12,
+    453 px), a small square inside near the centre (36 px) and a 1 px speck."""
+    mask = np.zeros((80, 120), dtype=bool)
+    mask[:, :30] = True
+    mask |= _ellipse_mask((80, 120), centre=(95.0, 20.0), axes=(12.0, 12.0))
+    mask[37:43, 57:63] = True
+    mask[70, 100] = True
+    path = tmp_path / "objects.png"
+    from PIL import Image
+
+    Image.fromarray(mask.astype(np.uint8) * 255).save(path)
+    return path, mask
+
+
+def test_image_object_choice_is_logged_and_prefers_objects_inside(tmp_path, caplog):
+    path, mask = _objects_image(tmp_path)
+    with caplog.at_level("INFO", logger="modalmorph.io"):
+        shape = read_shape(path)  # the disc, not the larger strip touching the border
+    assert_allclose(shape.points.mean(axis=0), (95.0, 20.0), atol=0.5)
+    said = caplog.text
+    assert "touches the image border and is larger (2400 px)" in said
+    assert f"{path}: object 1 touches the image border" in said
+    disc = _ellipse_mask((80, 120), centre=(95.0, 20.0), axes=(12.0, 12.0)).sum()
+    assert re.search(rf"object \d of 4 \(the largest not touching the border\): {disc} px, "
+                     r"inside the image", said)
+    caplog.clear()
+    with caplog.at_level("INFO", logger="modalmorph.io"):
+        centre = read_shape(path, object="center")
+    assert_allclose(centre.points.mean(axis=0), (59.5, 39.5), atol=0.5)
+    assert "(nearest the image centre): 36 px, inside the image" in caplog.text
+    strip = read_shape(path, object=1)  # reading order: the strip starts at pixel (0, 0)
+    assert_allclose(np.ptp(strip.points, axis=0), (29.0, 79.0), atol=1.0)
+    with pytest.raises(ValueError, match=_err(path) + r"object=9, but the image has 4 "):
+        read_shape(path, object=9)
+    with pytest.raises(ValueError, match="object must be 'largest', 'center' or a label"):
+        read_shape(path, object="biggest")
+
+
+def test_image_a_speck_inside_does_not_outrank_a_large_object_on_the_border(tmp_path,
+                                                                           caplog):
+    from PIL import Image
+
+    mask = np.zeros((60, 90), dtype=bool)
+    mask[:, :40] = True  # a large object cut by the border
+    mask[30, 70] = True  # a 1 px speck inside
+    Image.fromarray(mask.astype(np.uint8) * 255).save(tmp_path / "cut.png")
+    with caplog.at_level("INFO", logger="modalmorph.io"):
+        shape = read_shape(tmp_path / "cut.png")
+    assert_allclose(np.ptp(shape.points, axis=0), (39.0, 59.0), atol=1.0)
+    assert "though it touches the border" in caplog.text
+    assert "touches the image border" in caplog.text
+
+
+def test_image_and_svg_shapes_carry_their_frame(tmp_path):
+    from PIL import Image
+
+    mask = _ellipse_mask()
+    Image.fromarray(mask.astype(np.uint8) * 255).save(tmp_path / "m.png")
+    shape = read_shape(tmp_path / "m.png")
+    assert shape.frame == ImageFrame(unit="px", image=str(tmp_path / "m.png"),
+                                     size=mask.shape, y_down=True)
+    assert shape.with_points(shape.points + 1.0).frame is shape.frame  # kept
+    svg = tmp_path / "a.svg"
+    svg.write_text('<svg xmlns="http://www.w3.org/2000/svg"><circle cx="5" cy="5" r="3"/>'
+                   "</svg>")
+    assert read_shape(svg).frame.y_down and read_shape(svg).frame.image is None
+    np.savetxt(tmp_path / "a.csv", SQUARE, delimiter=",")
+    assert read_shape(tmp_path / "a.csv").frame is None  # plain coordinates, y up
+
+
 def test_image_errors(tmp_path):
     from PIL import Image
 
@@ -554,13 +646,15 @@ def test_save_result(tmp_path, rng):
     morph = _fake_morph(rng)
     params = {"material": "rubber", "dt": np.float64(0.01), "steps": np.int64(4),
               "sigma": np.array([1.0, 2.0]), "source": tmp_path / "a.csv", "nothing": None}
-    save_result(morph, tmp_path / "out", params=params)
+    inputs = [{"path": "/data/a.csv", "sha256": "0" * 64}]
+    save_result(morph, tmp_path / "out", params=params, options={"k": 100.0}, inputs=inputs)
     out = tmp_path / "out"
     assert sorted(p.name for p in out.iterdir()) == ["final_shape.csv", "result.json",
                                                     "shapes.npz"]
     result = json.loads((out / "result.json").read_text())
     assert result == {
-        "modalmorph_version": modalmorph.__version__,
+        "modalmorph_version": modalmorph.__version__, "inputs": inputs,
+        "options": {"k": 100.0},
         "parameters": {"material": "rubber", "dt": 0.01, "steps": 4, "sigma": [1.0, 2.0],
                        "source": str(tmp_path / "a.csv"), "nothing": None},
         "converged": True, "stop_reason": "mean distance below tolerance", "steps": 4,

@@ -2,9 +2,11 @@
 
 import numpy as np
 import pytest
-from numpy.testing import assert_allclose
+from numpy.testing import assert_allclose, assert_array_equal
 
+from modalmorph import MatchOptions, MorphOptions, match
 from modalmorph.datasets import load_hand, load_hands
+from modalmorph.errors import OptionError
 from modalmorph.pipeline import MorphDivergedError, morph
 
 from .conftest import self_intersections, sphere_points
@@ -163,17 +165,17 @@ def test_3d_point_sets(rng):
 @pytest.mark.parametrize(
     "kwargs, match",
     [
-        ({"k": 0}, "k must be a positive"),
-        ({"dt": -1}, "dt must be a positive"),
+        ({"k": 0}, r"k must be a number in \[1e-06, 1e\+06\]"),
+        ({"dt": -1}, r"dt must be a number in \[1e-06, 1e\+06\]"),
         ({"alpha": 0.1, "delta": 0.5}, "not unconditionally stable"),
         ({"delta": 0.4}, "not unconditionally stable"),
         ({"scheme": "magic"}, "scheme must be"),
-        ({"modes": 1.5}, r"fraction must be in \(0, 1\]"),
+        ({"modes": 1.5}, r"modes must be None \(all\), a count >= 1 or a fraction in \(0, 1\]"),
         ({"modes": 10_000}, "modes must be None, a count between 1 and 200"),
         ({"matching": np.zeros((0, 2), int)}, "no node is matched"),
         ({"matching": np.array([[0, 500]])}, "out of range"),
         ({"damping": (0.1, -0.1)}, "damping must be a ratio"),
-        ({"max_steps": 0}, "max_steps must be a positive integer"),
+        ({"max_steps": 0}, "max_steps must be an integer >= 1"),
         ({"unmatched": "nearest"}, "unmatched must be one of"),
     ],
 )
@@ -228,3 +230,45 @@ def test_initial_displacement_moves_faster(n, model_nodes):
     assert_allclose(quick.shapes[0], a)  # step 0 is still the source
     assert quick.mean_distance[1] < rest.mean_distance[1]
     assert quick.converged and quick.steps <= rest.steps
+
+
+# ---------------------------------------------------------------------- options
+
+
+def test_options_object_same_as_keywords():
+    a, b, pairs = _hands(0, 3, 80)
+    kw = dict(k=60, dt=0.2, damping=(0.1, 0.4), modes=2 / 3, loads="nodal", max_steps=40)
+    by_keywords = morph(a, b, matching=pairs, **kw)
+    by_object = morph(a, b, matching=pairs, options=MorphOptions(**kw))
+    # the object and keyword overrides on top of it: later wins, field by field
+    mixed = morph(a, b, matching=pairs, options=MorphOptions(k=1.0, dt=0.2), k=60,
+                  damping=(0.1, 0.4), modes=2 / 3, loads="nodal", max_steps=40)
+    for r in (by_object, mixed):
+        assert_array_equal(r.shapes, by_keywords.shapes)  # bitwise: the same computation
+        assert r.options == by_keywords.options == MorphOptions(**kw)
+        assert r.params == by_keywords.params
+
+
+def test_overrides_routed_to_the_matcher():
+    a, b, _ = _hands(0, 3, 60)
+    r = morph(a, b, rotation="none", match_sigma=1.5, method="global", max_steps=2)
+    assert r.match_options == MatchOptions(rotation="none", sigma=1.5, method="global")
+    assert_array_equal(r.matching.pairs,
+                       match(a, b, rotation="none", sigma=1.5, method="global").pairs)
+    assert r.params["rotation"] == "none" and r.params["match_sigma"] == 1.5
+    assert r.params["max_steps"] == 2 and r.options.max_steps == 2
+    # a MatchOptions as the matching: computed with those, overrides on top
+    given = morph(a, b, matching=MatchOptions(method="global"), rotation="none",
+                  match_sigma=1.5, max_steps=2)
+    assert_array_equal(given.matching.pairs, r.matching.pairs)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"kk": 1}, "unknown morph option 'kk'"),
+    ({"options": {"k": 1}}, "options must be a MorphOptions, got dict"),
+    ({"rotation": "sideways"}, "rotation must be one of auto, free, none"),
+])
+def test_unknown_or_bad_override_refused(kwargs, match):
+    a, b, pairs = _hands(0, 3, 40)
+    with pytest.raises(OptionError, match=match):
+        morph(a, b, **kwargs)

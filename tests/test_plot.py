@@ -6,6 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from numpy.testing import assert_allclose
 
 pytest.importorskip("matplotlib")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -13,7 +14,10 @@ from matplotlib.axes import Axes  # noqa: E402
 from PIL import Image  # noqa: E402
 
 from modalmorph.plot import (  # noqa: E402
+    MAX_ANIMATION_FRAMES,
+    TARGET_COLOR,
     animate,
+    frame_steps,
     plot_energy,
     plot_matches,
     plot_shapes,
@@ -104,7 +108,8 @@ def test_plot_matches_on_bare_arrays_and_given_axes():
     fig, ax = plt.subplots()
     out = plot_matches(morph.shapes[0], morph.target.points, morph.matching.pairs, ax=ax)
     assert out is ax
-    assert ax.get_xlabel() == "x" and ax.get_ylabel() == "y"
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("x (input units)", "y (input units)")
+    assert ax.get_ylim()[0] < ax.get_ylim()[1]  # plain coordinates: y up
 
 
 def test_plot_matches_rejects_bad_pairs():
@@ -128,7 +133,7 @@ def test_plot_shapes_has_a_labelled_colour_bar(morph, color_by, label):
     assert label in cbar_axes[0].get_ylabel()
     if not is_3d(ax):
         assert ax.get_aspect() == 1.0  # equal aspect
-        assert (ax.get_xlabel(), ax.get_ylabel()) == ("x", "y")
+        assert (ax.get_xlabel(), ax.get_ylabel()) == ("x (input units)", "y (input units)")
     legend = [t.get_text() for t in ax.get_legend().get_texts()]
     assert legend[0].startswith("source") and legend[-1] == "target"
 
@@ -139,6 +144,16 @@ def test_plot_shapes_energy_norm_is_centred_on_zero():
     lines = ax.collections[0]
     assert lines.norm.vmin == pytest.approx(-lines.norm.vmax)  # zero in the middle
     assert lines.norm.vmax == pytest.approx(np.abs(morph.node_energy).max())
+    bar = ax.figure.axes[-1]  # spans the values, not a symmetric range they do not fill
+    e = morph.node_energy
+    assert bar.get_ylim() == pytest.approx((e.min(), e.max()))
+    assert e.min() > -0.5 * e.max()  # (so the check above is not the symmetric range)
+
+
+def test_plot_shapes_loads_start_at_zero_with_units():
+    ax = plot_shapes(circle_to_ellipse(), color_by="load")
+    assert ax.collections[0].norm.vmin == 0.0
+    assert ax.figure.axes[-1].get_ylabel().endswith("(k x input units)")
 
 
 def test_plot_shapes_draws_every_kth_step_and_the_last():
@@ -147,6 +162,28 @@ def test_plot_shapes_draws_every_kth_step_and_the_last():
     # steps 0, 3, 6, 9 and 10; each closed contour is 40 edges split in two halves
     assert len(ax.collections[0].get_segments()) == 5 * 40 * 2
     assert sorted(set(ax.collections[0].get_array())) == [0, 3, 6, 9, 10]
+
+
+def test_plot_shapes_frames_along_the_path():
+    morph = circle_to_ellipse(m=40, steps=40)
+    ax = plot_shapes(morph, color_by=None, every=10, frames="path")
+    drawn = sorted(set(ax.collections[0].get_array()))
+    assert drawn == frame_steps(morph, "path", 5).tolist()
+
+
+def test_frame_steps_spread_evenly_in_time_or_along_the_path():
+    morph = circle_to_ellipse(steps=40)  # moves fast, then slows down: t = 1 - (1 - s)^2
+    assert frame_steps(morph).tolist() == list(range(41))
+    assert frame_steps(morph, "time", 5).tolist() == [0, 10, 20, 30, 40]
+    steps = frame_steps(morph, "path", 5)
+    assert steps[0] == 0 and steps[-1] == 40 and np.all(np.diff(steps) > 0)
+    s = np.linspace(0.0, 1.0, 41)
+    way = 1.0 - (1.0 - s) ** 2  # the fraction of the path made at each step
+    assert_allclose(np.diff(way[steps]), 0.25, atol=0.03)  # 1/40 of a step's rounding
+    timed = np.diff(way[[0, 10, 20, 30, 40]])
+    assert timed.max() > 5 * timed.min()  # evenly in time: a jump, then a crawl
+    with pytest.raises(ValueError, match="frames must be one of time, path"):
+        frame_steps(morph, "steps")
 
 
 def test_plot_shapes_rejects_bad_options():
@@ -163,6 +200,8 @@ def test_plot_energy(morph):
     assert ax.get_xlabel() == "step"
     twin = [a for a in ax.figure.axes if a is not ax]
     assert len(twin) == 1 and "mean distance" in twin[0].get_ylabel()
+    assert twin[0].get_ylabel().endswith("(input units)")
+    assert ax.get_ylabel().endswith("($k_{ref} L^2$)")
     ticks = ax.get_xticks()
     assert np.allclose(ticks, np.round(ticks))  # integer steps
     legend = [t.get_text() for t in ax.get_legend().get_texts()]
@@ -197,6 +236,55 @@ def test_animate_writes_one_gif_frame_per_step(tmp_path, kind, steps, color_by):
     assert plt.get_fignums() == []
 
 
+@pytest.mark.parametrize("frames", ["time", "path"])
+def test_animate_caps_the_frames(tmp_path, frames):
+    morph = circle_to_ellipse(m=12, steps=3 * MAX_ANIMATION_FRAMES)
+    path = animate(morph, tmp_path / "morph.gif", dpi=20, frames=frames)
+    with Image.open(path) as im:
+        assert im.n_frames == len(frame_steps(morph, frames, MAX_ANIMATION_FRAMES))
+        assert 0.8 * MAX_ANIMATION_FRAMES <= im.n_frames <= MAX_ANIMATION_FRAMES
+
+
+def _mask_png(tmp_path):
+    """A 60 x 80 mask with one rectangle in its top-left quadrant (rows 6-20, columns
+    8-30), read as a shape (pixel coordinates, y down, its image remembered)."""
+    from modalmorph.io import read_shape
+
+    mask = np.zeros((60, 80), dtype=np.uint8)
+    mask[6:21, 8:31] = 255
+    Image.fromarray(mask).save(tmp_path / "mask.png")
+    return read_shape(tmp_path / "mask.png", nodes=40)
+
+
+@pytest.mark.parametrize("background", [True, False])
+def test_image_shapes_are_drawn_y_down_over_their_image(tmp_path, background):
+    from matplotlib.figure import Figure
+
+    shape = _mask_png(tmp_path)
+    fig = Figure(figsize=(4, 3), dpi=100)  # 400 x 300 px, like the image's 80 x 60
+    ax = fig.add_axes((0, 0, 1, 1))
+    plot_matches(shape, shape, [], background=background, ax=ax)
+    fig.savefig(tmp_path / "fig.png", dpi=100)
+    rgb = np.asarray(Image.open(tmp_path / "fig.png").convert("RGB")).astype(float)
+    assert rgb.shape == (300, 400, 3)
+    colour = np.array([int(TARGET_COLOR[i:i + 2], 16) for i in (1, 3, 5)])
+    rows, cols = np.nonzero(np.abs(rgb - colour).max(axis=2) < 30)
+    x, y = ax.transData.transform(shape.points.mean(axis=0))
+    assert_allclose((cols.mean(), rows.mean()), (x, 300 - y), atol=3)  # where it says
+    assert ax.yaxis.get_inverted() and ax.get_ylabel() == "y (px)"
+    if not background:  # the axes fit the shape; no image under it
+        assert (rgb[5, 5] == 255).all()
+        return
+    # the whole image shows, pixel (r, c) at PNG pixel (5 r + 2, 5 c + 2): the object's
+    # outline in the top-left quadrant, not the bottom-left (y up would put it there)
+    assert rows.max() < 150 and cols.max() < 200
+    assert_allclose((rows.min(), rows.max()), (5 * 6, 5 * 21), atol=4)
+    assert_allclose((cols.min(), cols.max()), (5 * 8, 5 * 31), atol=4)
+    inside, outside = rgb[5 * 13 + 2, 5 * 19 + 2], rgb[5 * 45 + 2, 5 * 60 + 2]
+    assert (inside == 255).all()  # white object
+    assert_allclose(outside, 255 * 0.75, atol=2)  # black background at 25 % opacity
+
+
 def test_animate_rejects_unknown_formats_and_mp4_without_ffmpeg(tmp_path, monkeypatch):
     from matplotlib import animation
 
@@ -212,16 +300,13 @@ def test_animate_rejects_unknown_formats_and_mp4_without_ffmpeg(tmp_path, monkey
 
 
 def test_animate_leaves_no_partial_file_on_failure(tmp_path, monkeypatch):
-    from matplotlib import animation
+    save = Image.Image.save
 
-    grab = animation.PillowWriter.grab_frame
+    def fail_after_writing_some(self, fp, *args, **kwargs):
+        save(self, fp, *args, **{**kwargs, "append_images": []})  # a truncated file
+        raise RuntimeError("disk full")
 
-    def fail_after_first_frame(self, **kwargs):
-        if self._frames:  # one frame grabbed: finish() will write a truncated file
-            raise RuntimeError("disk full")
-        grab(self, **kwargs)
-
-    monkeypatch.setattr(animation.PillowWriter, "grab_frame", fail_after_first_frame)
+    monkeypatch.setattr(Image.Image, "save", fail_after_writing_some)
     with pytest.raises(RuntimeError, match="disk full"):
         animate(circle_to_ellipse(steps=3), tmp_path / "morph.gif", dpi=30)
     assert list(tmp_path.iterdir()) == []

@@ -1,4 +1,6 @@
-"""The sparse (truncated) solver against the dense one, and the solver selection."""
+"""The sparse (truncated) model against the dense one, and the solver selection.
+
+The solver contract (frequencies, (13), truncation) is tests/test_solvers.py."""
 
 import numpy as np
 import pytest
@@ -7,7 +9,8 @@ from scipy import sparse
 
 from modalmorph import FEModel
 from modalmorph.datasets import load_hand
-from modalmorph.element import AUTO_DENSE_MAX_DOF, DENSE_MAX_DOF, cutoff_radius
+from modalmorph.element import AUTO_DENSE_MAX_DOF, cutoff_radius
+from modalmorph.model import DENSE_MAX_DOF
 from modalmorph.shape import resample
 
 from .conftest import sphere_points
@@ -26,15 +29,6 @@ def both(request):
     return dense, sparse_, dense.modes(N_MODES + 1), sparse_.modes(N_MODES)
 
 
-def test_frequencies_agree(both):
-    _, _, md, ms = both
-    # The default cutoff drops entries below 1e-10 of the diagonal; measured differences
-    # are 2e-11 (2D) and 2e-10 (3D, more neighbours cut). 1e-8 leaves room for round-off
-    # in the Lanczos solve while catching any truncation or solver fault (those show up
-    # at 1e-6 and above).
-    assert_allclose(ms.frequencies, md.frequencies[:N_MODES], rtol=1e-8)
-
-
 def test_mode_subspaces_agree(both):
     dense, _, md, ms = both
     # The exact model's M: the sparse modes are M-orthonormal up to the truncation
@@ -51,23 +45,6 @@ def test_mode_subspaces_agree(both):
     if gaps[N_MODES - 1] > 1e-3:
         cosines = np.linalg.svd(C, compute_uv=False)
         assert_allclose(cosines, 1.0, atol=1e-9)
-
-
-def test_sparse_modes_mass_normalised(both):
-    _, model, _, ms = both
-    eye = np.eye(N_MODES)
-    # in the Gaussian basis: psi^T (rho I kron Gamma) psi = I, Rayleigh-Ritz makes it exact
-    Mg_psi = model.material.rho * np.concatenate(
-        [model.gram_sparse[1] @ p for p in ms.gaussian.reshape(model.dim, model.m, -1)])
-    assert np.abs(ms.gaussian.T @ Mg_psi - eye).max() <= 1e-10
-    # and in the nodal basis with the truncated model's M (13)
-    assert np.abs(ms.shapes.T @ model.apply_mass(ms.shapes) - eye).max() <= 1e-8
-    KPhi = model.apply_stiffness(ms.shapes)
-    w2 = ms.eigenvalues
-    assert np.abs(ms.shapes.T @ KPhi - np.diag(w2)).max() <= 1e-8 * w2.max()
-    # the cheap product of method.md: K Phi = M Phi Omega^2
-    MPhi = model.mass_times_modes(ms)
-    assert_allclose(MPhi * w2, KPhi, atol=1e-8 * np.abs(KPhi).max())
 
 
 def test_sparse_matrices_are_truncated_dense(both):

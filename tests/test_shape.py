@@ -8,7 +8,7 @@ from hypothesis.extra.numpy import arrays
 from numpy.testing import assert_allclose
 
 from modalmorph import Shape
-from modalmorph.shape import resample
+from modalmorph.shape import ImageFrame, resample
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 
@@ -75,3 +75,17 @@ def test_resample_arc_length():
     assert_allclose(steps, 0.5)  # perimeter 4 in 8 equal steps
     with pytest.raises(ValueError, match="n must be >= 3"):
         resample(SQUARE, 2)
+
+
+def test_image_frame_is_carried_and_checked():
+    from modalmorph.datasets import PIXELS, heart_shape
+
+    frame = ImageFrame(image="a.png", size=(60, 80))
+    shape = Shape(SQUARE, frame=frame)
+    assert shape.frame.y_down and shape.frame.unit == "px"
+    moved = shape.with_points(SQUARE * 2.0)
+    assert moved.frame is frame and moved.closed == shape.closed
+    assert Shape(SQUARE).frame is None  # plain coordinates
+    with pytest.raises(ValueError, match="frame must be an ImageFrame or None"):
+        Shape(SQUARE, frame="px")
+    assert heart_shape("systole").frame is PIXELS  # traced on an image: y down

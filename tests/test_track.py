@@ -92,10 +92,12 @@ def test_errors_name_the_frame(hearts):
         track([ed, ed[:2]])
     with pytest.raises(ValueError, match="at least 2"):
         track([ed])
-    with pytest.raises(ValueError, match="unknown option"):
+    with pytest.raises(ValueError, match="morph_options: unknown MorphOptions option 'kk'"):
         track([ed, ed], morph_options={"kk": 1})
     with pytest.raises(ValueError, match="reference"):
         track([ed, ed], reference="last")
+    with pytest.raises(ValueError, match="unknown TrackOptions option 'refrence'"):
+        track([ed, ed], refrence="first")
     with pytest.raises(ValueError, match="start_node"):
         track([ed, ed], start_node=60)
     with pytest.raises(ValueError, match="correspondence='modal'"):
@@ -209,3 +211,18 @@ def test_real_cycle_ed_es_ed(hearts):
     spacing = np.linalg.norm(np.diff(ed, axis=0), axis=1).mean()
     back = np.linalg.norm(result.points[2] - ed, axis=1).mean()
     assert back <= spacing  # measured 0.41-0.93 spacings on the 15 shared slices
+
+
+def test_options_objects_same_as_dicts(hearts):
+    from modalmorph import MatchOptions, MorphOptions, TrackOptions
+
+    frames = [resample(hearts[0], 50), resample(hearts[1], 60), resample(hearts[0], 55)]
+    by_dict = track(frames, correspondence="modal", match_options={"method": "global"},
+                    morph_options={"k": 60, "max_steps": 20})
+    by_object = track(frames, options=TrackOptions(correspondence="modal"),
+                      match_options=MatchOptions(method="global"),
+                      morph_options=MorphOptions(k=60, max_steps=20))
+    np.testing.assert_array_equal(by_object.points, by_dict.points)  # bitwise
+    assert by_object.params == by_dict.params
+    assert by_object.params["match_options"]["method"] == "global"
+    assert all(m.options == MorphOptions(k=60, max_steps=20) for m in by_object.morphs)

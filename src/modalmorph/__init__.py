@@ -5,32 +5,39 @@ between objects by a physical methodology", with Sclaroff's Gaussian finite elem
 modal matching, Horn alignment, Lagrange's dynamic equilibrium and strain energy.
 """
 
-__version__ = "0.1.0"
-
 from .align import Similarity, align
-from .element import DEFAULT_SIGMA, FEModel
+from .element import DEFAULT_SIGMA
+from .errors import MorphDivergedError
 from .io import read_shape
 from .matching import Matching, match
 from .material import MATERIALS, POLYETHYLENE, RUBBER, UNIT, Material
+from .model import FEModel
 from .modes import Modes, rayleigh
-from .pipeline import Morph, MorphDivergedError, morph
+from .options import MatchOptions, MorphOptions
+from .pipeline import Morph, morph
 from .shape import Shape, resample
-from .track import Track, track
+from .simulation import Simulation
+from .track import Track, TrackOptions, track
+from .version import __version__
 
 __all__ = [
     "DEFAULT_SIGMA",
     "FEModel",
     "MATERIALS",
     "Material",
+    "MatchOptions",
     "Matching",
     "Modes",
     "Morph",
     "MorphDivergedError",
+    "MorphOptions",
     "POLYETHYLENE",
     "RUBBER",
     "Shape",
     "Similarity",
+    "Simulation",
     "Track",
+    "TrackOptions",
     "UNIT",
     "__version__",
     "align",

@@ -1,7 +1,8 @@
 """``modalmorph app``: the method as a local web application.
 
-The user picks two shapes (a bundled example or uploaded files), sets the options of
-:func:`modalmorph.morph` in a form generated from its signature and docstring, runs it,
+The user picks two shapes (a bundled example or uploaded files), sets the options
+of :func:`modalmorph.match` and :func:`modalmorph.morph` in a form generated from the fields
+of their option classes (:data:`modalmorph.runs.FORM_CLASSES`), runs them,
 follows its progress and explores the result in the viewer of :mod:`modalmorph.report`.
 
 The server is the standard library's :class:`http.server.ThreadingHTTPServer`: no
@@ -20,7 +21,6 @@ JSON), ``GET /api/job/<id>/file/<name>`` (downloads), ``POST /api/job/<id>/stop`
 
 from __future__ import annotations
 
-import inspect
 import ipaddress
 import json
 import logging
@@ -35,9 +35,12 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
-from .material import MATERIALS, Material
-from .pipeline import morph
-from .report import image_data, image_size, render_page, result_payload
+from . import plot
+from .datasets import hand_shape, heart_shape
+from .io import SUPPORTED_EXTENSIONS, read_shape, save_result
+from .options import flat_fields
+from .report import image_data, image_size, render_page, result_payload, write_html
+from .runs import FORM_CLASSES, Settings, compute_morph, default_text
 
 __all__ = ["MAX_UPLOAD", "MAX_PIXELS", "make_server", "morph_options", "parse_options",
            "serve"]
@@ -55,8 +58,6 @@ _MAX_JSON = 64 * 2**10
 # Shapes and runs kept in memory, the oldest forgotten beyond this count (a run of 1000
 # nodes and 100 steps holds about 10 MB of viewer JSON).
 _KEEP = 16
-# Keyword arguments of morph() that are not options of the form.
-_NOT_OPTIONS = ("source", "target", "matching", "progress")
 _FILES = ("morph.json", "result.json", "shapes.npz", "final_shape.csv", "report.html",
           "shapes_plain.png", "shapes_load.png", "shapes_energy.png", "matches.png",
           "energy.png", "morph.gif")
@@ -65,122 +66,54 @@ _FILES = ("morph.json", "result.json", "shapes.npz", "final_shape.csv", "report.
 # ------------------------------------------------------------------------ the form
 
 
-def _docstring_parameters(func) -> dict[str, tuple[str, str]]:
-    """``{name: (type line, description)}`` from a numpydoc ``Parameters`` section."""
-    doc = inspect.getdoc(func) or ""
-    section = re.search(r"Parameters\n-+\n(.*?)(?:\n\n[A-Z]\w+\n-+\n|\Z)", doc, re.S)
-    out = {}
-    for block in re.split(r"\n(?=\S)", section.group(1) if section else ""):
-        head, _, body = block.partition("\n")
-        names, _, kind = head.partition(" : ")
-        text = re.sub(r":\w+:`~?([^`]+)`|``([^`]+)``", lambda m: m[1] or m[2],
-                      " ".join(body.split()))
-        for name in names.split(","):
-            out[name.strip()] = (kind.strip(), text)
-    return out
-
-
 def morph_options() -> list[dict]:
-    """The form: one entry per keyword option of :func:`modalmorph.morph`.
+    """The form: one entry per option of :data:`modalmorph.runs.FORM_CLASSES` (matching,
+    physics, loads and time integration, stopping), by flat name.
 
-    Generated from its signature (names, defaults, annotations) and its docstring (choices
-    and help), so that a new option of ``morph`` appears in the form by itself. Each entry
-    has ``name``, ``kind`` ("bool", "choice" or "text"), ``default`` (JSON), ``default_text``
-    (as typed in the form), ``choices`` (or None), ``summary`` (the help's first
-    sentence) and ``help``.
+    Generated from the fields' metadata, so that a new option appears in the form by
+    itself. Each entry has ``name``, ``group``, ``kind`` ("bool", "choice" or "text"),
+    ``default`` (JSON), ``default_text`` (as typed in the form), ``choices`` (or None),
+    ``summary`` (the help's first sentence) and ``help``.
     """
-    docs = _docstring_parameters(morph)
     options = []
-    for name, par in inspect.signature(morph).parameters.items():
-        if name in _NOT_OPTIONS:
-            continue
-        kind_line, help_text = docs.get(name, ("", ""))
-        choices = re.findall(r'"([^"]+)"', kind_line.partition("}")[0]) \
-            if kind_line.startswith("{") else None
-        default = par.default
-        if isinstance(default, Material):
-            choices, default = sorted(MATERIALS), default.name
-        kind = "bool" if isinstance(default, bool) else "choice" if choices else "text"
-        text = "" if default is None else f"{default:g}" if isinstance(default, float) \
-            else str(default)
-        summary = re.split(r"(?<=\.)\s", help_text, maxsplit=1)[0]
-        options.append(dict(name=name, kind=kind, default=default, default_text=text,
-                            choices=choices, annotation=str(par.annotation), summary=summary,
-                            help=help_text))
+    for name, cls, f in flat_fields(FORM_CLASSES):
+        meta = f.metadata
+        choices = list(meta["choices"]) if meta["kind"] == "str" and meta["choices"] \
+            else None
+        kind = "bool" if meta["kind"] == "bool" else "choice" if choices else "text"
+        default = cls().record()[f.name]
+        text = default_text(f)
+        summary = re.split(r"(?<=\.)\s", meta["help"], maxsplit=1)[0]
+        options.append(dict(name=name, group=meta["group"], kind=kind, default=default,
+                            default_text=text, choices=choices, summary=summary,
+                            help=meta["help"]))
     return options
 
 
-def _number(name: str, token: str):
-    """An int when written as one, else a float; ``a/b`` is a fraction."""
-    try:
-        if "/" in token:
-            num, den = token.split("/")
-            return float(num) / float(den)
-        return int(token) if re.fullmatch(r"[+-]?\d+", token) else float(token)
-    except (ValueError, ZeroDivisionError):
-        raise ValueError(f"{name} must be a number, got {token!r}") from None
+def parse_options(values: dict) -> Settings:
+    """The run's settings from the form's values (text, or booleans for check boxes).
 
-
-def parse_options(values: dict) -> dict:
-    """Keyword arguments of :func:`modalmorph.morph` from the form's values (strings).
-
-    An empty field takes the default. Numbers are read as written (``40`` an int,
-    ``0.5`` or ``2/3`` a float); an option that takes a pair (``damping``) reads one or two
-    numbers separated by spaces or commas. Values are otherwise passed on unchanged:
-    :func:`morph` itself refuses invalid ones with its own message.
+    An empty field takes the default; text is parsed as on the command line
+    (:func:`modalmorph.options.parse_value`: ``40``, ``2/3``, ``0.5 1``, ``rubber``,
+    ``1e5 0.3 1000``).
 
     Raises
     ------
-    ValueError
-        For an unknown option, text that is not a number where one is needed, or an
-        unknown material.
+    OptionError
+        For an unknown option or an invalid value (the message names the option).
     """
-    specs = {o["name"]: o for o in morph_options()}
-    unknown = sorted(set(values) - set(specs))
-    if unknown:
-        raise ValueError(f"unknown option {unknown[0]!r}; known: {', '.join(specs)}")
-    kw = {}
-    for name, value in values.items():
-        spec = specs[name]
-        if spec["kind"] == "bool":
-            if not isinstance(value, bool):
-                raise ValueError(f"{name} must be true or false, got {value!r}")
-            kw[name] = value
-            continue
-        text = str(value).strip()
-        if text == "" or text.lower() in ("none", "all") and spec["default"] is None:
-            continue  # the default
-        if name == "material":
-            if text not in MATERIALS:
-                raise ValueError(f"material must be one of {sorted(MATERIALS)}, got {text!r}")
-            kw[name] = MATERIALS[text]
-        elif spec["kind"] == "choice" or "str" in spec["annotation"]:
-            kw[name] = text
-        else:
-            tokens = text.replace(",", " ").split()
-            numbers = [_number(name, t) for t in tokens]
-            if len(numbers) == 2 and "tuple" in spec["annotation"]:
-                kw[name] = tuple(float(n) for n in numbers)
-            elif len(numbers) == 1:
-                kw[name] = numbers[0]
-            else:
-                raise ValueError(f"{name} takes one number"
-                                 + (" or two" if "tuple" in spec["annotation"] else "")
-                                 + f", got {text!r}")
-    return kw
+    given = {name: value for name, value in values.items()
+             if not (isinstance(value, str) and not value.strip())}
+    return Settings.from_flat(given, FORM_CLASSES, where="options")
 
 
 def _examples() -> dict:
     """The bundled pairs, as in ``modalmorph demo``."""
-    from .datasets import load_hand, load_heart
-    from .shape import Shape, resample
-
     return {
         "heart": ("heart: left ventricle, end-diastole -> end-systole",
-                  lambda: (Shape(load_heart("diastole")), Shape(load_heart("systole")))),
+                  lambda: (heart_shape("diastole"), heart_shape("systole"))),
         "hands": ("hands: hand 0 (120 nodes) -> hand 3 (140 nodes)",
-                  lambda: (Shape(resample(load_hand(0), 120)),
-                           Shape(resample(load_hand(3), 140)))),
+                  lambda: (hand_shape(0, 120), hand_shape(3, 140))),
     }
 
 
@@ -194,8 +127,9 @@ class _Stopped(Exception):
 class _Job:
     """One run of morph() in a thread, with its progress and, at the end, its files."""
 
-    def __init__(self, source, target, kw: dict, folder: Path, title: str, images: dict):
-        self.source, self.target, self.kw = source, target, kw
+    def __init__(self, source, target, settings: Settings, folder: Path, title: str,
+                 images: dict):
+        self.source, self.target, self.settings = source, target, settings
         self.folder, self.title, self.images = folder, title, images
         self.state, self.step, self.distance = "running", 0, None
         self.error = self.field = self.result = self.payload = None
@@ -211,7 +145,8 @@ class _Job:
 
     def _run(self) -> None:
         try:
-            result = morph(self.source, self.target, progress=self._progress, **self.kw)
+            result = compute_morph(self.source, self.target, self.settings,
+                                   progress=self._progress)
             self.payload = result_payload(result, title=self.title, images=self.images)
             self.result, self.state = result, "done"
         except (ValueError, ArithmeticError, _Stopped) as exc:  # MorphDivergedError too
@@ -223,7 +158,7 @@ class _Job:
 
     def status(self) -> dict:
         return dict(state=self.state, step=self.step, distance=self.distance,
-                    max_steps=self.kw.get("max_steps", 100), error=self.error,
+                    max_steps=self.settings.morph.max_steps, error=self.error,
                     field=self.field, files=list(_FILES) if self.state == "done" else [])
 
     def file(self, name: str) -> Path:
@@ -237,15 +172,12 @@ class _Job:
         return path
 
     def _write(self, name: str) -> None:
-        from . import plot
-        from .io import save_result
-        from .report import write_html
-
         r, out = self.result, self.folder
         if name == "morph.json":
             (out / name).write_text(json.dumps(self.payload, allow_nan=False), "utf-8")
         elif name in ("result.json", "shapes.npz", "final_shape.csv"):
-            save_result(r, out, params=r.params)
+            save_result(r, out, params=r.params,
+                        options=self.settings.record(FORM_CLASSES))
         elif name == "report.html":
             write_html(r, out / name, title=self.title, images=self.images)
         elif name == "morph.gif":
@@ -255,7 +187,7 @@ class _Job:
 
 
 def _field_of(message: str) -> str | None:
-    """The option a library message names first (its messages start with the name)."""
+    """The option a message names first (option messages start with the name)."""
     names = [o["name"] for o in morph_options()]
     words = re.findall(r"\w+", message)
     return next((w for w in words[:3] if w in names), None)
@@ -384,8 +316,6 @@ class _Handler(BaseHTTPRequestHandler):
                     "target": self._store(target, f"{name} target", None)})
 
     def _post_upload(self, rest, query):
-        from .io import SUPPORTED_EXTENSIONS, read_shape
-
         q = {k: v[0].strip() for k, v in query.items()}
         name = Path(q.get("name", "")).name
         suffix = Path(name).suffix.lower()
@@ -432,7 +362,7 @@ class _Handler(BaseHTTPRequestHandler):
             raise _HTTPError(HTTPStatus.BAD_REQUEST,
                              "choose the source and the target shapes first")
         try:
-            kw = parse_options(body.get("options") or {})
+            settings = parse_options(body.get("options") or {})
         except ValueError as exc:
             raise _HTTPError(HTTPStatus.BAD_REQUEST, str(exc),
                              _field_of(str(exc))) from None
@@ -442,7 +372,7 @@ class _Handler(BaseHTTPRequestHandler):
         jid = uuid.uuid4().hex
         folder = Path(self.server.tmp.name) / jid
         folder.mkdir()
-        job = _Job(src["shape"], tgt["shape"], kw, folder, f"{src['name']} → {tgt['name']}",
+        job = _Job(src["shape"], tgt["shape"], settings, folder, f"{src['name']} → {tgt['name']}",
                    images)
         self.server.keep(self.server.jobs, jid, job)
         self._json({"job": jid})

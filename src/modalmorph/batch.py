@@ -2,8 +2,8 @@
 
 Each item of a batch is one ``modalmorph morph`` (a source, target pair) or one
 ``modalmorph track`` (a sequence of frames); it is computed and written by a worker into
-``OUT/<id>/``, exactly as the single command writes it (:func:`modalmorph.cli.morph_files`,
-:func:`modalmorph.cli.track_files`). The folder appears at once, by one rename of a
+``OUT/<id>/``, exactly as the single command writes it (:func:`modalmorph.runs.morph_files`,
+:func:`modalmorph.runs.track_files`). The folder appears at once, by one rename of a
 finished staging folder, so a killed run leaves every item folder complete or absent, and
 an item whose folder exists is skipped on the next run. A failing item is recorded with its
 one-line message and the batch goes on. ``OUT/summary.csv`` (and ``summary.parquet`` with
@@ -25,22 +25,22 @@ import os
 import shutil
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
-from .cli import check_options, morph_files, track_files
+from .errors import OptionError
 from .io import atomic_write
+from .options import OutputOptions
+from .plot import plot_batch
+from .runs import BATCH_CLASSES, Settings, morph_files, track_files
 
-__all__ = ["FIGURES", "Item", "ItemResult", "Batch", "read_manifest", "run", "run_item",
-           "write_summary"]
+__all__ = ["FIGURES", "ENGINES", "Engine", "Item", "ItemResult", "Batch", "read_manifest",
+           "run", "run_item", "write_summary"]
 
 log = logging.getLogger(__name__)
 
 FIGURES = ("none", "summary", "all")
 ENGINES = ("auto", "dask", "processes")
-# Options of track() an item may set (besides those of a --config file).
-TRACK_OPTIONS = {"reference": str, "correspondence": str, "cycle": bool, "segments": int,
-                 "start_node": int}
 # Each worker process computes with one BLAS thread, so N workers use N cores without
 # oversubscription (a loop of 4 pairs on 2 cores lost time to BLAS threads fighting).
 _ONE_THREAD = {name: "1" for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
@@ -69,9 +69,9 @@ class Item:
         A sequence's frames (anything :func:`modalmorph.io.read_frames` reads: a glob
         pattern, a folder, a stack, or several files); empty for a pair.
     options : dict
-        Options for this item, as in a ``--config`` file, plus those of
-        :func:`modalmorph.track` (``reference``, ``correspondence``, ``cycle``,
-        ``segments``, ``start_node``); they override the batch's options.
+        Options for this item by flat name, as in a ``--config`` file (those of
+        :func:`modalmorph.track` included: ``reference``, ``cycle``, ...); they override
+        the batch's options.
     """
 
     id: str
@@ -89,7 +89,12 @@ class Item:
         if pair == bool(self.frames) or (not pair and (self.source or self.target)):
             raise ValueError(f"item {self.id!r}: give either source and target (a pair) "
                              f"or frames (a sequence)")
-        check_options(self.options, f"item {self.id!r}", extra=TRACK_OPTIONS)
+        self.settings(Settings())  # refuses unknown names and invalid values
+
+    def settings(self, batch: Settings) -> Settings:
+        """The batch's settings with this item's options over them."""
+        return Settings.from_flat({**batch.flat(BATCH_CLASSES), **self.options},
+                                  BATCH_CLASSES, where=f"item {self.id!r}")
 
     @property
     def kind(self) -> str:
@@ -275,14 +280,14 @@ def _resolve(row: dict, base: Path) -> dict:
 # ------------------------------------------------------------------------------ one item
 
 
-def run_item(item: Item, out, *, options: dict | None = None, figures: str = "none",
+def run_item(item: Item, out, *, settings: Settings | None = None, figures: str = "none",
              force: bool = False) -> ItemResult:
     """Compute one item into ``out/<id>/`` (the task each worker runs); never raises.
 
     The item is written into a hidden staging folder ``out/.<id>.partial/`` and renamed
     to ``out/<id>`` when complete, so ``out/<id>`` is complete or absent at every moment.
-    An item already complete there is skipped unless ``force``. ``options`` are the
-    batch's; the item's own override them.
+    An item already complete there is skipped unless ``force``. ``settings`` are the
+    batch's; the item's own options override them.
     """
     out = Path(out)
     final = out / item.id
@@ -293,7 +298,13 @@ def run_item(item: Item, out, *, options: dict | None = None, figures: str = "no
     try:
         shutil.rmtree(staging, ignore_errors=True)  # left by a killed run
         staging.mkdir(parents=True)  # the writer's temporary folder then lives inside it
-        _compute(item, staging / item.id, {**(options or {}), **item.options}, figures)
+        render = figures == "all"
+        own = replace(item.settings(settings or Settings()),
+                      output=OutputOptions(figures=render, gif=render))
+        if item.kind == "pair":
+            morph_files(item.source, item.target, staging / item.id, own)
+        else:
+            track_files(list(item.frames), staging / item.id, own)
         _publish(staging / item.id, final)
         return _row(item, final, "ok", seconds=time.perf_counter() - start)
     except Exception as exc:  # any failure of one item is recorded; the batch goes on
@@ -303,15 +314,6 @@ def run_item(item: Item, out, *, options: dict | None = None, figures: str = "no
 
 
 _RESULT_FILE = {"pair": "result.json", "sequence": "track.json"}
-
-
-def _compute(item: Item, out: Path, options: dict, figures: str) -> None:
-    render = figures == "all"
-    if item.kind == "pair":
-        morph_files(item.source, item.target, out, options, figures=render, gif=render)
-    else:
-        own = {key: options.pop(key) for key in TRACK_OPTIONS if key in options}
-        track_files(list(item.frames), out, options, figures=render, gif=render, **own)
 
 
 def _publish(ready: Path, final: Path) -> None:
@@ -353,9 +355,60 @@ def _failed(item: Item, exc: BaseException, *, seconds: float | None = None) -> 
 # ------------------------------------------------------------------------------ the batch
 
 
-def run(items: Sequence[Item], out, *, options: dict | None = None, figures: str = "none",
-        force: bool = False, workers: int | None = None, scheduler: str | None = None,
-        client=None, engine: str = "auto",
+@dataclass(frozen=True)
+class Engine:
+    """What runs the items of a batch.
+
+    Attributes
+    ----------
+    kind : {"auto", "dask", "processes"}
+        ``"auto"``: Dask when installed, else a local process pool (with a warning).
+    workers : int, optional
+        Worker processes of a local cluster or pool (default: one per core).
+    scheduler : str, optional
+        Address of a running Dask scheduler (``tcp://host:port``).
+    client : dask.distributed.Client, optional
+        Run on this client's cluster (it is left open).
+    """
+
+    kind: str = "auto"
+    workers: int | None = None
+    scheduler: str | None = None
+    client: object = None
+
+    def __post_init__(self):
+        if self.kind not in ENGINES:
+            raise OptionError(f"engine must be one of {ENGINES}, got {self.kind!r}")
+        if self.workers is not None and (isinstance(self.workers, bool) or self.workers < 1):
+            raise OptionError(f"workers must be a positive integer, got {self.workers!r}")
+        if self.kind == "processes" and (self.client is not None
+                                         or self.scheduler is not None):
+            raise OptionError("engine 'processes' cannot use a Dask client or scheduler")
+
+    def uses_dask(self) -> bool:
+        """Whether the items run on Dask (said once in the log when it is missing)."""
+        if self.client is not None or self.scheduler is not None or self.kind == "dask":
+            return True
+        if self.kind == "processes":
+            return False
+        try:
+            import distributed  # noqa: F401
+            return True
+        except ImportError:
+            log.warning("Dask is not installed (pip install 'modalmorph[dask]'): running "
+                        "the batch in a local process pool")
+            return False
+
+    def start(self):
+        """The context of :func:`_on_dask` or :func:`_on_processes`."""
+        workers = self.workers or len(os.sched_getaffinity(0))
+        if self.uses_dask():
+            return _on_dask(self.client, self.scheduler, workers)
+        return _on_processes(workers)
+
+
+def run(items: Sequence[Item], out, *, settings: Settings | None = None,
+        figures: str = "none", force: bool = False, engine: Engine | None = None,
         progress: Callable[[ItemResult, int, int], None] | None = None) -> Batch:
     """Run every item of a batch and write ``out/summary.csv``.
 
@@ -365,22 +418,16 @@ def run(items: Sequence[Item], out, *, options: dict | None = None, figures: str
         From :func:`read_manifest`, or built directly.
     out : str or os.PathLike
         Output folder: ``out/<id>/`` per item, and the summary.
-    options : dict, optional
-        Options for every item, as in a ``--config`` file; an item's own win.
+    settings : Settings, optional
+        Options for every item (:class:`modalmorph.runs.Settings`); an item's own win.
     figures : {"none", "summary", "all"}, optional
         ``"none"`` (default): results only; ``"summary"``: also ``out/summary.png``,
         rendered once; ``"all"``: each item's figures and animation too, rendered by its
         worker.
     force : bool, optional
         Redo items already complete in ``out``.
-    workers : int, optional
-        Worker processes of a local cluster or pool (default: one per core).
-    scheduler : str, optional
-        Address of a running Dask scheduler (``tcp://host:port``).
-    client : dask.distributed.Client, optional
-        Run on this client's cluster (it is left open).
-    engine : {"auto", "dask", "processes"}, optional
-        ``"auto"``: Dask when installed, else a local process pool (with a warning).
+    engine : Engine, optional
+        Dask or a local process pool (default ``Engine()``: Dask when installed).
     progress : callable, optional
         Called as each item ends: ``progress(row, n_done, n_items)``.
 
@@ -391,29 +438,14 @@ def run(items: Sequence[Item], out, *, options: dict | None = None, figures: str
         then are complete and recorded).
     """
     if figures not in FIGURES:
-        raise ValueError(f"figures must be one of {FIGURES}, got {figures!r}")
-    if engine not in ENGINES:
-        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
-    if workers is not None and (isinstance(workers, bool) or workers < 1):
-        raise ValueError(f"workers must be a positive integer, got {workers!r}")
+        raise OptionError(f"figures must be one of {FIGURES}, got {figures!r}")
     items = list(items)
     ids = [item.id for item in items]
     if len(set(ids)) != len(ids):
         raise ValueError(f"items must have distinct ids; repeated: "
                          f"{sorted({i for i in ids if ids.count(i) > 1})}")
-    options = check_options(options or {}, "options", extra=TRACK_OPTIONS)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    use_dask = client is not None or scheduler is not None or engine == "dask"
-    if engine == "auto" and not use_dask:
-        try:
-            import distributed  # noqa: F401
-            use_dask = True
-        except ImportError:
-            log.warning("Dask is not installed (pip install 'modalmorph[dask]'): running "
-                        "the batch in a local process pool")
-    if engine == "processes" and (client is not None or scheduler is not None):
-        raise ValueError("engine='processes' cannot use a Dask client or scheduler")
     rows: dict[str, ItemResult] = {}
 
     def done(row):
@@ -421,21 +453,18 @@ def run(items: Sequence[Item], out, *, options: dict | None = None, figures: str
         if progress is not None:
             progress(row, len(rows), len(items))
 
-    task = dict(out=out, options=options, figures=figures, force=force)
-    workers = workers or len(os.sched_getaffinity(0))
+    task = dict(out=out, settings=settings or Settings(), figures=figures, force=force)
     interrupted = False
-    with _one_blas_thread():
-        runner = _on_dask(client, scheduler, workers) if use_dask else _on_processes(workers)
-        with runner as (submit, wait, engine_name, dashboard):
-            try:
-                wait({submit(item, task): item for item in items}, done)
-            except KeyboardInterrupt:
-                interrupted = True
+    with _one_blas_thread(), (engine or Engine()).start() as (submit, wait, name, dashboard):
+        try:
+            wait({submit(item, task): item for item in items}, done)
+        except KeyboardInterrupt:
+            interrupted = True
     results = tuple(rows.get(item.id) or ItemResult(
         id=item.id, kind=item.kind, inputs=item.inputs, status="interrupted",
         error="not finished when the batch was stopped") for item in items)
     files = write_summary(results, out, figure=figures == "summary")
-    return Batch(out=out, results=results, files=tuple(files), engine=engine_name,
+    return Batch(out=out, results=results, files=tuple(files), engine=name,
                  dashboard=dashboard, interrupted=interrupted)
 
 
@@ -553,8 +582,6 @@ def write_summary(results: Sequence[ItemResult], out, *, figure: bool = False) -
             pq.write_table(pa.Table.from_pylist(records, schema=schema), tmp)
     if figure:
         from matplotlib.figure import Figure
-
-        from .plot import plot_batch
 
         fig = Figure(figsize=(6.4, 4.4))  # no pyplot: no figure left open
         plot_batch(results, ax=fig.add_subplot())

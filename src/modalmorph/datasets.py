@@ -6,7 +6,13 @@ from importlib import resources
 
 import numpy as np
 
-__all__ = ["load_hand", "load_hands", "load_heart", "data_path"]
+from .shape import ImageFrame, Shape, resample
+
+__all__ = ["load_hand", "load_hands", "load_heart", "data_path", "hand_shape", "heart_shape",
+           "PIXELS"]
+
+# The bundled outlines were traced on images: pixel coordinates, y pointing down.
+PIXELS = ImageFrame(unit="px")
 
 _HEART = {
     "diastole": "SC-HF-I-07-IM-0001-0080-icontour-manual.csv",
@@ -55,3 +61,16 @@ def load_heart(phase: str = "diastole") -> np.ndarray:
     if phase not in _HEART:
         raise ValueError(f"phase must be 'diastole' or 'systole', got {phase!r}")
     return _read(data_path("heart", _HEART[phase]))
+
+
+def heart_shape(phase: str = "diastole") -> Shape:
+    """:func:`load_heart` as a closed :class:`~modalmorph.Shape` in image coordinates
+    (:data:`PIXELS`: figures draw it with y down, as on the MRI slice)."""
+    return Shape(load_heart(phase), frame=PIXELS)
+
+
+def hand_shape(i: int = 0, nodes: int | None = None) -> Shape:
+    """:func:`load_hand` as a closed :class:`~modalmorph.Shape` in image coordinates,
+    resampled to ``nodes`` nodes evenly by arc length if given."""
+    points = load_hand(i)
+    return Shape(points if nodes is None else resample(points, nodes), frame=PIXELS)

@@ -9,11 +9,42 @@ extensions                             content                             needs
 ``.npy`` ``.npz``                      an (m, d) array                     numpy
 ``.json``                              ``[[x, y], ...]`` or an object      numpy
 ``.svg``                               the first path, polygon, etc.       ``[images]``
-``.png`` ``.tif`` ``.tiff`` ``.jpg``   the largest object's contour        ``[images]``
+``.png`` ``.tif`` ``.tiff`` ``.jpg``   one object's outer contour          ``[images]``
 ``.jpeg`` ``.bmp``
 ``.ply`` ``.obj`` ``.stl`` ``.off``    a triangle surface or point cloud   ``[mesh]``
 ``.vtk`` ``.vtu`` ``.msh`` ``.mesh``
 =====================================  ==================================  ===============
+
+In detail:
+
+- text: one node per line, ``x, y`` or ``x, y, z``, separated by commas, tabs, semicolons
+  or spaces (with semicolons a decimal comma is accepted). An optional first line of
+  column names; if it names columns ``x`` and ``y`` (and ``z``), those columns are used
+  and others ignored. Blank lines and lines starting with ``#`` are skipped.
+- ``.npy``: an (m, 2) or (m, 3) array; ``.npz``: the array ``points`` (or the only array
+  in the file), and optionally ``faces`` and ``closed``.
+- ``.json``: a list ``[[x, y], ...]`` or an object ``{"points": [...], "closed": bool,
+  "faces": [[i, j, k], ...]}`` (``closed`` and ``faces`` optional).
+- ``.svg``: the first ``<path>``, ``<polygon>``, ``<polyline>``, ``<circle>``,
+  ``<ellipse>`` or ``<rect>`` drawn (not in ``<defs>``; transforms applied; for a path
+  with several subpaths, the first), read with svgelements and sampled uniformly by arc
+  length. Closed if it ends with ``Z``, is a polygon, circle, ellipse or rect, or ends
+  where it starts. Coordinates are the file's user units (before any ``viewBox``
+  scaling), y pointing down (:data:`SVG_FRAME`).
+- images: the outer contour of one object, in pixel coordinates ``(x, y) = (column,
+  row)``, y pointing down (the shape's :class:`~modalmorph.shape.ImageFrame` names the
+  image, drawn under the figures). A two-level image is a mask; a grey-level image needs
+  ``threshold``. Whichever side covers most of the image border is the background, so
+  dark objects on a light background work too. Colour is converted to grey; an alpha
+  channel is the mask only when it is one (:data:`MIN_OBJECT_PIXELS`,
+  :data:`MAX_PARTIAL_ALPHA`). Of the mask's 4-connected objects, ``object="largest"``
+  takes the largest, but one inside the image over a larger one touching the border
+  (:data:`INSIDE_FRACTION`); ``"center"`` the one nearest the image centre; a number,
+  that object in reading order. The choice is logged (its area, whether it touches the
+  border).
+- meshes: a 3D surface (points and triangles; quads and polygons are split into
+  triangles; unreferenced and exactly repeated points dropped) or, with no surface cells,
+  a point cloud of all its points.
 
 Every problem with a file is a :class:`ValueError` whose message starts with the file's
 name, so the command line can print it as it is: third-party parsers' own exceptions,
@@ -30,6 +61,7 @@ from __future__ import annotations
 import dataclasses
 import glob
 import json
+import logging
 import math
 import os
 import re
@@ -47,19 +79,28 @@ from pathlib import Path
 
 import numpy as np
 
-from .shape import Shape, resample
+from .options import OBJECTS
+from .quality import area
+from .shape import ImageFrame, Shape, resample
+from .version import __version__
 
 __all__ = [
     "DEFAULT_NODES",
     "Frames",
+    "INSIDE_FRACTION",
+    "MAX_PARTIAL_ALPHA",
+    "MIN_OBJECT_PIXELS",
     "OUTPUT_MARKER",
+    "OUTPUT_MARKERS",
     "READ_SECONDS",
     "SUPPORTED_EXTENSIONS",
+    "SVG_FRAME",
     "atomic_output_dir",
     "atomic_write",
     "read_frames",
     "read_shape",
     "remove_leftovers",
+    "result_summary",
     "save_result",
     "save_track",
     "write_points",
@@ -86,48 +127,39 @@ _READ_SECONDS_PER_MB = 2.0
 # chord error of a quarter circle sampled this finely is below 1e-4 of its radius.
 _SVG_SAMPLES = 128
 
+# SVG coordinates are the file's user units, y pointing down (no image to draw under them).
+SVG_FRAME = ImageFrame(unit="SVG user units")
+
+# Images: an object inside the image is taken over a larger one touching the border when
+# its area is at least this fraction of the larger one's. A choice, not a measurement: an
+# object the user means is rarely ten times smaller than a strip cut by the border, while
+# specks of a noisy threshold (a few px) are far below it and never outrank a large object.
+INSIDE_FRACTION = 0.1
+# An alpha channel is read as the mask only when at least this many pixels are opaque
+# and as many transparent (an outline of >= 3 nodes needs a 2 x 2 block at least: 3 x 3
+# keeps a margin) and at most this fraction of the pixels is partly transparent, between 10
+# and 90 % opacity. Measured on 256 x 256 images: the antialiased edge of a disc of radius
+# 100 px covers 0.73 % of the pixels (radius 50: 0.36 %); a radial vignette 89 %.
+MIN_OBJECT_PIXELS = 9
+MAX_PARTIAL_ALPHA = 0.2
+
+_log = logging.getLogger(__name__)
+
 
 # --------------------------------------------------------------------------------------
 # reading
 
 
 def read_shape(path, *, nodes: int | None = None, threshold: float | None = None,
-               closed: bool | None = None) -> Shape:
+               object: str | int = "largest", closed: bool | None = None) -> Shape:
     """Read a shape from a file, choosing the reader by the file's extension.
 
     Parameters
     ----------
     path : str or os.PathLike
-        The file. Supported extensions are listed in :data:`SUPPORTED_EXTENSIONS`:
-
-        - ``.csv``, ``.tsv``, ``.txt``: one node per line, ``x, y`` or ``x, y, z``,
-          separated by commas, tabs, semicolons or spaces (with semicolons a decimal comma
-          is accepted). An optional first line of column names; if it names columns
-          ``x`` and ``y`` (and ``z``), those columns are used and others ignored. Blank
-          lines and lines starting with ``#`` are skipped.
-        - ``.npy``: an (m, 2) or (m, 3) array; ``.npz``: the array ``points`` (or the
-          only array in the file), and optionally ``faces`` and ``closed``.
-        - ``.json``: a list ``[[x, y], ...]`` or an object ``{"points": [...],
-          "closed": bool, "faces": [[i, j, k], ...]}`` (``closed`` and ``faces``
-          optional).
-        - ``.svg``: the first ``<path>``, ``<polygon>``, ``<polyline>``, ``<circle>``,
-          ``<ellipse>`` or ``<rect>`` drawn (not in ``<defs>``; transforms applied; for a
-          path with several subpaths, the first), read with svgelements and sampled
-          uniformly by arc length. Closed if it ends with ``Z``, is a polygon, circle,
-          ellipse or rect, or ends where it starts. Coordinates are the file's user units
-          (before any ``viewBox`` scaling), with y pointing down.
-        - ``.png``, ``.tif``/``.tiff``, ``.jpg``/``.jpeg``, ``.bmp``: the outer contour of
-          the largest object, in pixel coordinates ``(x, y) = (column, row)``. A two-level
-          image is a mask; a grey-level image needs ``threshold``. Whichever side covers
-          most of the image border is the background, so dark objects on a light
-          background work too. Colour is converted to grey; an alpha channel that varies
-          is used as the mask.
-        - ``.ply``, ``.obj``, ``.stl``, ``.off``, ``.vtk``, ``.vtu``, ``.msh``, ``.mesh``:
-          a 3D surface (points and triangles; quads and polygons are split into
-          triangles; unreferenced and exactly repeated points dropped) or, with no
-          surface cells, a point cloud of all its points.
-
-        A final row repeating the first (a contour written closed) is dropped.
+        The file; the formats, by extension, are in the module's docstring
+        (:data:`SUPPORTED_EXTENSIONS`). A final row repeating the first (a contour written
+        closed) is dropped.
     nodes : int, optional
         Resample a 2D contour to this many nodes, equally spaced by arc length. Defaults to
         the file's nodes for point files and to :data:`DEFAULT_NODES` for images and SVG.
@@ -135,6 +167,10 @@ def read_shape(path, *, nodes: int | None = None, threshold: float | None = None
     threshold : float, optional
         Images only: grey level separating the object from the background, in the
         image's own units (0-255 for 8-bit images).
+    object : {"largest", "center"} or int, optional
+        Images only: which object to outline (:func:`choose_object`): the largest (not
+        touching the border if a large enough one does not), the one nearest the image
+        centre, or a label number (1 = the first in reading order). The choice is logged.
     closed : bool, optional
         Whether a contour closes on itself; overrides the file (an SVG path's ``Z``, a
         JSON ``"closed"``). Defaults to closed.
@@ -143,7 +179,8 @@ def read_shape(path, *, nodes: int | None = None, threshold: float | None = None
     -------
     Shape
         2D shapes are ordered contours; 3D shapes are surfaces (with ``faces``) or point
-        clouds.
+        clouds. Shapes from images and SVG carry an :class:`~modalmorph.shape.ImageFrame`
+        (y down; the image file, drawn under the figures).
 
     Raises
     ------
@@ -152,17 +189,29 @@ def read_shape(path, *, nodes: int | None = None, threshold: float | None = None
         non-numeric or non-finite values (with the line or node), wrong number of
         columns, fewer than 3 nodes, an image with no object, an unreadable image, SVG or
         mesh. The message starts with the file's name.
-    ImportError
-        When an image, SVG or mesh needs an optional library that is not installed.
     """
     name = os.fspath(path)
     path = Path(path)
+    ext = _check_read_args(path, name, nodes, threshold, object)
+    pts, faces, file_closed, frame = _read_guarded(path, name, ext, (threshold, object))
+    if ext in _IMAGE or ext == ".svg":
+        nodes = nodes or DEFAULT_NODES
+    if closed is None and ext not in _MESH:  # (meshes: unordered, never closed)
+        closed = True if file_closed is None else file_closed
+    if ext not in _MESH and faces is None and len(pts) > 1 and np.array_equal(pts[0], pts[-1]):
+        pts = pts[:-1]  # a closed contour written with its first node repeated
+    return _make_shape(name, pts, faces=faces, nodes=nodes, closed=closed, frame=frame)
+
+
+def _check_read_args(path: Path, name: str, nodes, threshold, choice) -> str:
+    """Validate :func:`read_shape`'s options and the file's presence; its extension."""
     if nodes is not None and (isinstance(nodes, bool) or not isinstance(nodes, int | np.integer)
                               or nodes < 3):
         raise ValueError(f"nodes must be an integer >= 3, got {nodes!r}")
     if threshold is not None and (isinstance(threshold, bool) or not (
             isinstance(threshold, int | float | np.number) and math.isfinite(threshold))):
         raise ValueError(f"threshold must be a finite number, got {threshold!r}")
+    _check_object(choice)
     if not path.exists():
         raise ValueError(f"{name}: no such file")
     if path.is_dir():
@@ -175,36 +224,36 @@ def read_shape(path, *, nodes: int | None = None, threshold: float | None = None
         raise ValueError(f"{name}: the file is empty")
     if threshold is not None and ext not in _IMAGE:
         raise ValueError(f"{name}: threshold= applies to images only, not {ext} files")
-
-    pts, faces, file_closed = _read_guarded(path, name, ext, threshold)
-    if ext in _IMAGE or ext == ".svg":
-        nodes = nodes or DEFAULT_NODES
-    if closed is None and ext not in _MESH:  # (meshes: unordered, never closed)
-        closed = True if file_closed is None else file_closed
-    if ext not in _MESH and faces is None and len(pts) > 1 and np.array_equal(pts[0], pts[-1]):
-        pts = pts[:-1]  # a closed contour written with its first node repeated
-    return _make_shape(name, pts, faces=faces, nodes=nodes, closed=closed)
+    return ext
 
 
-def _read_file(path: Path, name: str, ext: str, threshold):
-    """(points, faces or None, closed or None) from the reader for ``ext``."""
+def _check_object(choice) -> None:
+    label = isinstance(choice, int | np.integer) and not isinstance(choice, bool)
+    if not (choice in OBJECTS or label and choice >= 1):
+        raise ValueError(f"object must be 'largest', 'center' or a label number >= 1, "
+                         f"got {choice!r}")
+
+
+def _read_file(path: Path, name: str, ext: str, image_options):
+    """(points, faces or None, closed or None, ImageFrame or None) from the reader."""
     if ext in _IMAGE:
-        return _read_image(path, name, threshold), None, None
+        pts, size = _read_image(path, name, *image_options)
+        return pts, None, None, ImageFrame(image=os.fspath(path), size=size)
     if ext == ".svg":
         pts, closed = _read_svg(path, name)
-        return pts, None, closed
+        return pts, None, closed, SVG_FRAME
     if ext in _MESH:
-        return (*_read_mesh(path, name), None)
+        return (*_read_mesh(path, name), None, None)
     if ext in _TEXT:
-        return _read_text(path, name), None, None
+        return _read_text(path, name), None, None, None
     if ext == ".npy":
-        return _read_npy(path, name), None, None
+        return _read_npy(path, name), None, None, None
     if ext == ".npz":
-        return _read_npz(path, name)
-    return _read_json(path, name)
+        return (*_read_npz(path, name), None)
+    return (*_read_json(path, name), None)
 
 
-def _read_guarded(path: Path, name: str, ext: str, threshold):
+def _read_guarded(path: Path, name: str, ext: str, image_options):
     """Run the reader with bounded time; every failure a ValueError naming the file.
 
     Third-party parsers raise many types for a malformed file (and numpy a MemoryError for
@@ -214,7 +263,7 @@ def _read_guarded(path: Path, name: str, ext: str, threshold):
     seconds = READ_SECONDS + _READ_SECONDS_PER_MB * path.stat().st_size / 1e6
     try:
         with _deadline(seconds):
-            return _read_file(path, name, ext, threshold)
+            return _read_file(path, name, ext, image_options)
     except ImportError:
         raise
     except _ReadTimeout:
@@ -263,7 +312,7 @@ def _deadline(seconds: float):
         signal.signal(signal.SIGALRM, previous)
 
 
-def _make_shape(name, pts, *, faces=None, nodes=None, closed=True) -> Shape:
+def _make_shape(name, pts, *, faces=None, nodes=None, closed=True, frame=None) -> Shape:
     """Check an (m, d) array of coordinates from ``name``; resample; build the Shape."""
     pts = np.asarray(pts, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] not in (2, 3):
@@ -285,7 +334,7 @@ def _make_shape(name, pts, *, faces=None, nodes=None, closed=True) -> Shape:
                              f"{'surface' if faces is not None else 'point set'}")
         pts = resample(pts, int(nodes), closed=bool(closed))
     try:
-        return Shape(pts, closed=bool(closed), faces=faces)
+        return Shape(pts, closed=bool(closed), faces=faces, frame=frame)
     except ValueError as exc:
         raise ValueError(f"{name}: {exc}") from None
 
@@ -547,7 +596,8 @@ def _check_svg_source(se, element, where: str) -> None:
 # -- images -----------------------------------------------------------------------------
 
 
-def _read_image(path: Path, name: str, threshold: float | None) -> np.ndarray:
+def _read_image(path: Path, name: str, threshold: float | None, choice="largest"):
+    """The outline (m, 2) of the chosen object of an image file, and its (height, width)."""
     try:
         import skimage.measure  # noqa: F401  (the contour of the mask, below)
         from PIL import Image, UnidentifiedImageError
@@ -558,17 +608,16 @@ def _read_image(path: Path, name: str, threshold: float | None) -> np.ndarray:
         with warnings.catch_warnings():
             warnings.simplefilter("error", Image.DecompressionBombWarning)
             with Image.open(path) as image:
-                grey = _grey_levels(image)
+                grey = _grey_levels(image, name)
     except (OSError, UnidentifiedImageError, Image.DecompressionBombWarning,
             Image.DecompressionBombError, ValueError) as exc:
         raise ValueError(f"{name}: cannot read the image: {exc}") from None
-    return _image_contour(grey, name, threshold)
+    return _image_contour(grey, name, threshold, choice), grey.shape
 
 
-def _image_contour(grey: np.ndarray, name: str, threshold: float | None) -> np.ndarray:
-    """The outer contour (m, 2) of the largest object of a 2D grey or mask array."""
-    from skimage.measure import find_contours
-
+def _image_mask(grey: np.ndarray, name: str, threshold: float | None) -> np.ndarray:
+    """The object side of a 2D grey or mask array (bool): the brighter of two levels or
+    above ``threshold``, flipped when it covers most of the image's border."""
     if grey.dtype.kind == "f" and not np.isfinite(grey).all():
         raise ValueError(f"{name}: the image has {np.count_nonzero(~np.isfinite(grey))} "
                          f"non-finite (NaN or inf) pixels")
@@ -593,27 +642,80 @@ def _image_contour(grey: np.ndarray, name: str, threshold: float | None) -> np.n
     border = np.r_[mask[0], mask[-1], mask[1:-1, 0], mask[1:-1, -1]]
     if 2 * np.count_nonzero(border) > len(border):
         mask = ~mask  # the border is mostly "object": that side is the background
+    return mask
 
-    padded = np.pad(mask, 1).astype(np.float64)  # closes contours at the image's edge
+
+def _image_contour(grey: np.ndarray, name: str, threshold: float | None,
+                   choice="largest") -> np.ndarray:
+    """The outer contour (m, 2) of the chosen object of a 2D grey or mask array, in
+    ``(x, y) = (column, row)``, counter-clockwise in (x, y)."""
+    from skimage.measure import find_contours
+
+    chosen = _choose_object(_image_mask(grey, name, threshold), choice, name)
+    padded = np.pad(chosen, 1).astype(np.float64)  # closes contours at the image's edge
     contours = find_contours(padded, 0.5)
-    if not contours:
-        raise ValueError(f"{name}: no object outline in the image")
-    areas = [_signed_area(c) for c in contours]
-    best = contours[int(np.argmax(np.abs(areas)))]
+    best = contours[int(np.argmax([abs(area(c)) for c in contours]))]  # the outer
     pts = best[:-1, ::-1] - 1.0  # (row, col) -> (x, y); drop the closing repeat
-    if _signed_area(pts) < 0:
+    if area(pts) < 0:
         pts = pts[::-1]  # one orientation for every image: positive area in (x, y)
     return pts
 
 
-def _grey_levels(image) -> np.ndarray:
-    """A 2D array of grey levels (or alpha, if it varies) from a PIL image."""
+def _choose_object(mask: np.ndarray, choice, name: str) -> np.ndarray:
+    """The pixels (bool, like ``mask``) of the object ``choice`` names among the
+    4-connected objects of ``mask`` (the connectivity of the contour), logged."""
+    from scipy import ndimage
+    from skimage.measure import label
+
+    labels, count = label(mask, connectivity=1, return_num=True)  # reading order
+    index = np.arange(1, count + 1)
+    area = np.bincount(labels.ravel(), minlength=count + 1)[1:]
+    edge = np.unique(np.r_[labels[0], labels[-1], labels[:, 0], labels[:, -1]])
+    border = np.isin(index, edge)
+    if isinstance(choice, str) and choice == "center":
+        rows, cols = np.indices(mask.shape)
+        centre = np.hypot(rows - (mask.shape[0] - 1) / 2, cols - (mask.shape[1] - 1) / 2)
+        pick = int(np.argmin(ndimage.minimum(centre, labels, index)))
+        why = "nearest the image centre"
+    elif isinstance(choice, str):
+        pick, why = _largest_object(area, border, name)
+    elif choice > count:
+        raise ValueError(f"{name}: object={choice}, but the image has {count} object(s) "
+                         f"(numbered 1..{count} in reading order)")
+    else:
+        pick, why = choice - 1, "as asked"
+    where = "touches the image border" if border[pick] else "inside the image"
+    _log.info("%s: object %d of %d (%s): %d px, %s", name, pick + 1, count, why,
+              area[pick], where)
+    return labels == pick + 1
+
+
+def _largest_object(area: np.ndarray, border: np.ndarray, name: str) -> tuple[int, str]:
+    """Index of the largest object, preferring one inside the image (see
+    :data:`INSIDE_FRACTION`), and why it was chosen."""
+    largest = int(np.argmax(area))
+    inside = np.flatnonzero(~border)
+    if not border[largest] or not len(inside):
+        return largest, "the largest"
+    best = int(inside[np.argmax(area[inside])])
+    if area[best] >= INSIDE_FRACTION * area[largest]:
+        _log.warning("%s: object %d touches the image border and is larger (%d px) than "
+                     "object %d (%d px) inside the image: taking the one inside; "
+                     "object=%d takes the other", name, largest + 1, area[largest], best + 1,
+                     area[best], largest + 1)
+        return best, "the largest not touching the border"
+    return largest, (f"the largest, though it touches the border: the largest object "
+                     f"inside, {best + 1}, has {area[best]} px")
+
+
+def _grey_levels(image, name: str = "image") -> np.ndarray:
+    """A 2D array of grey levels from a PIL image, or its alpha channel as a 0/1 mask
+    when that is a real mask (:func:`_alpha_mask`)."""
     image.seek(0)  # the first frame of a multi-page TIFF
-    bands = image.getbands()
-    if "A" in bands:
-        alpha = np.asarray(image.getchannel("A"))
-        if alpha.min() != alpha.max():
-            return alpha
+    if "A" in image.getbands():
+        mask = _alpha_mask(np.asarray(image.getchannel("A")), name)
+        if mask is not None:
+            return mask
     if image.mode in ("1", "L", "I", "F") or image.mode.startswith("I;"):
         grey = np.asarray(image)
     else:
@@ -625,10 +727,22 @@ def _grey_levels(image) -> np.ndarray:
     return grey
 
 
-def _signed_area(pts: np.ndarray) -> float:
-    """Shoelace area of a closed polygon, positive when counter-clockwise in its axes."""
-    x, y = pts[:, 0], pts[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+def _alpha_mask(alpha: np.ndarray, name: str) -> np.ndarray | None:
+    """Opaque pixels (uint8 0/1) when the alpha channel is a real mask: at least
+    :data:`MIN_OBJECT_PIXELS` pixels each side of half opacity and at most
+    :data:`MAX_PARTIAL_ALPHA` of the pixels partly transparent; else None (logged)."""
+    top = float(np.iinfo(alpha.dtype).max) if alpha.dtype.kind in "iu" else 1.0
+    opaque = alpha >= 0.5 * top
+    partial = np.count_nonzero((alpha > 0.1 * top) & (alpha < 0.9 * top)) / alpha.size
+    n_opaque = int(np.count_nonzero(opaque))
+    if min(n_opaque, alpha.size - n_opaque) >= MIN_OBJECT_PIXELS and (
+            partial <= MAX_PARTIAL_ALPHA):
+        _log.info("%s: the alpha channel is the mask (%d opaque px)", name, n_opaque)
+        return opaque.astype(np.uint8)
+    _log.info("%s: alpha channel ignored (not a mask: %d of %d px opaque, %.0f %% partly "
+              "transparent); reading the grey levels", name, n_opaque, alpha.size,
+              100 * partial)
+    return None
 
 
 # -- meshes -----------------------------------------------------------------------------
@@ -775,73 +889,36 @@ def write_points(path, points) -> None:
             tmp.write_text(json.dumps(data) + "\n", encoding="utf-8")
 
 
-def save_result(morph, out_dir, *, params: dict) -> None:
+def save_result(morph, out_dir, *, params: dict, options: dict | None = None,
+                inputs: list | None = None) -> None:
     """Write a morph's result into ``out_dir`` (created if needed), one file at a time.
 
     Three files are written, each atomically (wrap the call in :func:`atomic_output_dir`
-    for all or nothing):
-
-    ``result.json``
-        A summary, with this schema::
-
-            {
-              "modalmorph_version": str,      # the library that wrote it
-              "parameters": {...},            # params, as given (made JSON-safe)
-              "converged": bool,              # the stopping criterion was met
-              "stop_reason": str,             # why the integration stopped
-              "steps": int,                   # T, the number of time steps taken
-              "matches": int,                 # K, the number of matched node pairs
-              "source_nodes": int,            # m
-              "target_nodes": int,            # n
-              "dim": int,                     # 2 or 3
-              "mean_distance": [float, ...],  # T + 1 values, per step (step 0 = source)
-              "energy": [float, ...]          # T + 1 values, strain energy per step
-            }
-
-        Non-finite numbers are written as ``null`` (strict JSON).
-
-    ``shapes.npz``
-        Arrays ``shapes`` (T+1, m, d), ``loads`` (T+1, m, d), ``node_energy`` (T+1, m),
-        ``energy`` (T+1,), ``mean_distance`` (T+1,) and ``pairs`` (K, 2), int: source and
-        target node indices of each match.
-
-    ``final_shape.csv``
-        The last intermediate shape, ``shapes[-1]``, with a header ``x,y[,z]``.
+    for all or nothing): ``result.json`` (the summary of :func:`result_summary`, strict
+    JSON: non-finite numbers as ``null``); ``shapes.npz``, arrays ``shapes`` (T+1, m, d),
+    ``loads`` (T+1, m, d), ``node_energy`` (T+1, m), ``energy`` (T+1,),
+    ``mean_distance`` (T+1,) and ``pairs`` (K, 2), int: source and target node indices of
+    each match; ``final_shape.csv``, the last shape ``shapes[-1]`` with a header
+    ``x,y[,z]``.
 
     Parameters
     ----------
-    morph : morph result
-        Has ``shapes``, ``loads``, ``energy``, ``node_energy``, ``mean_distance``,
-        ``matching.pairs``, ``converged``, ``stop_reason``, ``source``, ``target`` and
-        ``steps``.
+    morph : Morph
     out_dir : str or os.PathLike
     params : dict
-        The parameters of the run, stored in ``result.json``. Numpy scalars and arrays
-        and paths are converted; anything else not JSON-serialisable is an error.
+        The parameters the run used (``Morph.params``).
+    options : dict, optional
+        Every option of the run by flat name, as given (the command line's record).
+    inputs : list of dict, optional
+        The input files, ``{"path", "sha256"}`` each.
 
     Raises
     ------
     ValueError
-        If ``params`` holds a value that cannot be written as JSON.
+        If ``params`` or ``options`` hold a value that cannot be written as JSON.
     """
-    from . import __version__
-
     out_dir = Path(out_dir)
-    shapes = np.asarray(morph.shapes, dtype=np.float64)
-    pairs = np.asarray(morph.matching.pairs, dtype=np.intp).reshape(-1, 2)
-    summary = {
-        "modalmorph_version": __version__,
-        "parameters": params,
-        "converged": bool(morph.converged),
-        "stop_reason": str(morph.stop_reason),
-        "steps": int(morph.steps),
-        "matches": len(pairs),
-        "source_nodes": int(morph.source.m),
-        "target_nodes": int(morph.target.m),
-        "dim": int(morph.source.dim),
-        "mean_distance": _finite_or_none(morph.mean_distance),
-        "energy": _finite_or_none(morph.energy),
-    }
+    summary = result_summary(morph, params=params, options=options, inputs=inputs)
     try:
         text = json.dumps(summary, indent=2, default=_json_default, allow_nan=False)
     except (TypeError, ValueError) as exc:
@@ -849,13 +926,58 @@ def save_result(morph, out_dir, *, params: dict) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
     with atomic_write(out_dir / "result.json") as tmp:
         tmp.write_text(text + "\n", encoding="utf-8")
+    shapes = np.asarray(morph.shapes, dtype=np.float64)
     with atomic_write(out_dir / "shapes.npz") as tmp:
         np.savez_compressed(
             tmp, shapes=shapes, loads=np.asarray(morph.loads, dtype=np.float64),
             node_energy=np.asarray(morph.node_energy, dtype=np.float64),
             energy=np.asarray(morph.energy, dtype=np.float64),
-            mean_distance=np.asarray(morph.mean_distance, dtype=np.float64), pairs=pairs)
+            mean_distance=np.asarray(morph.mean_distance, dtype=np.float64),
+            pairs=_pairs_array(morph))
     write_points(out_dir / "final_shape.csv", shapes[-1])
+
+
+def result_summary(morph, *, params: dict, options: dict | None = None,
+                   inputs: list | None = None) -> dict:
+    """The content of ``result.json``::
+
+        {
+          "modalmorph_version": str,      # the library that wrote it
+          "inputs": [{"path", "sha256"}], # the input files (empty when not given)
+          "options": {...},               # every option as given, by flat name
+          "parameters": {...},            # what the run used (Morph.params)
+          "converged": bool,              # the stopping criterion was met
+          "stop_reason": str,             # why the integration stopped
+          "steps": int,                   # T, the number of time steps taken
+          "matches": int,                 # K, the number of matched node pairs
+          "source_nodes": int,            # m
+          "target_nodes": int,            # n
+          "dim": int,                     # 2 or 3
+          "mean_distance": [float, ...],  # T + 1 values, per step (step 0 = source)
+          "energy": [float, ...]          # T + 1 values, strain energy per step
+        }
+    """
+
+
+    return {
+        "modalmorph_version": __version__,
+        "inputs": list(inputs or []),
+        "options": dict(options or {}),
+        "parameters": params,
+        "converged": bool(morph.converged),
+        "stop_reason": str(morph.stop_reason),
+        "steps": int(morph.steps),
+        "matches": len(_pairs_array(morph)),
+        "source_nodes": int(morph.source.m),
+        "target_nodes": int(morph.target.m),
+        "dim": int(morph.source.dim),
+        "mean_distance": _finite_or_none(morph.mean_distance),
+        "energy": _finite_or_none(morph.energy),
+    }
+
+
+def _pairs_array(morph) -> np.ndarray:
+    return np.asarray(morph.matching.pairs, dtype=np.intp).reshape(-1, 2)
 
 
 def _finite_or_none(values) -> list:
@@ -883,8 +1005,10 @@ def _json_default(obj):
 # one whose process is gone was left by a killed run and is removed by the next writer.
 _TMP_TAG = ".modalmorph-tmp-"
 _LEFTOVER = re.compile(r"^\..*\.modalmorph-tmp-(\d+)-[\w-]+$")
-# A folder that is replaced as a whole must be empty or hold this file (a previous result).
+# A folder that is replaced as a whole must be empty or hold one of these files (a previous
+# result of morph or of track).
 OUTPUT_MARKER = "result.json"
+OUTPUT_MARKERS = (OUTPUT_MARKER, "track.json")
 # Seconds to sleep just before the final rename(s): read only here, set only by the tests
 # that kill a run at that moment.
 _PAUSE_ENV = "MODALMORPH_TEST_RENAME_PAUSE"
@@ -998,17 +1122,18 @@ def atomic_output_dir(final_dir):
     """Write a folder as a whole: yield a new temporary sibling folder to fill, then rename.
 
     On entry the destination is checked (a folder that exists must be empty or a previous
-    output, holding :data:`OUTPUT_MARKER`) and the temporary folder is created beside it:
-    an unwritable destination fails here, before any work. Temporary folders of killed
-    runs found there are removed (:func:`remove_leftovers`).
+    output, holding one of :data:`OUTPUT_MARKERS`) and the temporary folder is created
+    beside it: an unwritable destination fails here, before any work. Temporary folders of
+    killed runs found there are removed (:func:`remove_leftovers`).
 
     When the block ends normally, the temporary folder becomes ``final_dir`` by one rename;
     an existing ``final_dir`` is swapped with it in one step (``renameat2`` with
     ``RENAME_EXCHANGE`` on Linux) or, where that is not supported, renamed aside first.
     So at every instant ``final_dir`` is the old complete folder, the new complete folder
-    or (only in the fallback, between two renames) absent; the old one is deleted after.
-    Missing parent folders are created only then. When the block raises, the temporary
-    folder is deleted and ``final_dir`` is left as it was.
+    or (only in the fallback, between two renames) absent; the old one is deleted after,
+    with every file of the previous run. Missing parent folders are created only then.
+    When the block raises, the temporary folder is deleted and ``final_dir`` is left as
+    it was.
 
     Raises
     ------
@@ -1023,41 +1148,53 @@ def atomic_output_dir(final_dir):
     """
     name = os.fspath(final_dir)
     final = Path(os.path.abspath(final_dir))
+    tmp = _staging_folder(final, name)
+    try:
+        yield tmp
+        tmp = _put_in_place(tmp, final, name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _staging_folder(final: Path, name: str) -> Path:
+    """Check the destination and create the temporary folder that will replace it."""
     if final.is_symlink() or (final.exists() and not final.is_dir()):
         raise ValueError(f"{name}: exists and is not a folder")
-    if final.is_dir() and any(final.iterdir()) and not (final / OUTPUT_MARKER).is_file():
-        raise ValueError(f"{name}: a folder with other files in it (no {OUTPUT_MARKER}); the "
-                         f"output folder is replaced as a whole, so give a new or empty one")
+    if final.is_dir() and any(final.iterdir()) and not any(
+            (final / marker).is_file() for marker in OUTPUT_MARKERS):
+        raise ValueError(f"{name}: a folder with other files in it (no "
+                         f"{' or '.join(OUTPUT_MARKERS)}); the output folder is replaced "
+                         f"as a whole, so give a new or empty one")
     anchor = final.parent  # the nearest existing ancestor holds the temporary folder
     while not anchor.is_dir():
         if anchor.exists() or anchor.parent == anchor:
             raise ValueError(f"{name}: cannot create the folder: {anchor} is not a folder")
         anchor = anchor.parent
     try:
-        tmp = _temp_sibling(anchor, final.name or "out")
+        return _temp_sibling(anchor, final.name or "out")
     except OSError as exc:
         raise ValueError(f"{name}: cannot write the output folder: cannot create a folder in "
                          f"{anchor} ({exc.strerror})") from None
+
+
+def _put_in_place(tmp: Path, final: Path, name: str) -> Path:
+    """Rename the finished ``tmp`` to ``final``; returns what is left to delete."""
     try:
-        yield tmp
-        try:
-            final.parent.mkdir(parents=True, exist_ok=True)
-            _pause_for_tests()
-            if not final.is_dir():
-                os.rename(tmp, final)
-            elif _exchange(tmp, final):
-                pass  # tmp now holds the old folder, deleted below
-            else:
-                old = tmp.with_name(tmp.name + "-old")
-                os.rename(final, old)
-                _pause_for_tests()
-                os.rename(tmp, final)
-                tmp = old
-        except OSError as exc:
-            raise ValueError(f"{name}: cannot move the output folder into place "
-                             f"({exc.strerror})") from None
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        final.parent.mkdir(parents=True, exist_ok=True)
+        _pause_for_tests()
+        if not final.is_dir():
+            os.rename(tmp, final)
+            return tmp
+        if _exchange(tmp, final):
+            return tmp  # tmp now holds the old folder
+        old = tmp.with_name(tmp.name + "-old")
+        os.rename(final, old)
+        _pause_for_tests()
+        os.rename(tmp, final)
+        return old
+    except OSError as exc:
+        raise ValueError(f"{name}: cannot move the output folder into place "
+                         f"({exc.strerror})") from None
 
 
 # --------------------------------------------------------------------------------------
@@ -1081,8 +1218,8 @@ class Frames:
     names: tuple
 
 
-def read_frames(inputs, *, threshold: float | None = None,
-                nodes: int | None = None) -> Frames:
+def read_frames(inputs, *, threshold: float | None = None, nodes: int | None = None,
+                object: str | int = "largest") -> Frames:
     """Read a sequence of shapes (frames) from files.
 
     Parameters
@@ -1103,6 +1240,8 @@ def read_frames(inputs, *, threshold: float | None = None,
         Grey images: level separating the object from the background.
     nodes : int, optional
         Resample 2D contours to this many nodes (default: as in the file; 200 for images).
+    object : {"largest", "center"} or int, optional
+        Images: which object of each frame to outline (as in :func:`read_shape`).
 
     Returns
     -------
@@ -1117,11 +1256,13 @@ def read_frames(inputs, *, threshold: float | None = None,
     paths = [inputs] if isinstance(inputs, str | os.PathLike) else list(inputs)
     if not paths:
         raise ValueError("inputs: no file given")
+    _check_object(object)
+    read = dict(threshold=threshold, nodes=nodes, object=object)
     if len(paths) == 1:
-        names, shapes = _read_sequence(paths[0], threshold, nodes)
+        names, shapes = _read_sequence(paths[0], read)
     else:
         names = [os.fspath(p) for p in paths]
-        shapes = [read_shape(p, threshold=threshold, nodes=nodes) for p in paths]
+        shapes = [read_shape(p, **read) for p in paths]
     if len(shapes) < 2:
         raise ValueError(f"{names[0] if names else os.fspath(paths[0])}: a sequence needs "
                          f"at least 2 frames, got {len(shapes)}")
@@ -1133,13 +1274,14 @@ def _natural_key(path) -> list:
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", os.fspath(path))]
 
 
-def _read_sequence(path, threshold, nodes):
+def _read_sequence(path, read: dict):
+    """(names, shapes) of the frames in one input; ``read``: :func:`read_shape`'s options."""
     name = os.fspath(path)
     if any(c in name for c in "*?[") and not Path(path).exists():
         files = sorted(glob.glob(name), key=_natural_key)
         if not files:
             raise ValueError(f"{name}: no file matches the pattern")
-        return files, [read_shape(f, threshold=threshold, nodes=nodes) for f in files]
+        return files, [read_shape(f, **read) for f in files]
     path = Path(path)
     if path.is_dir():
         files = sorted((p for p in path.iterdir() if p.is_file() and not p.name.startswith(".")
@@ -1148,32 +1290,32 @@ def _read_sequence(path, threshold, nodes):
             raise ValueError(f"{name}: no shape file in the folder (extensions: "
                              f"{', '.join(SUPPORTED_EXTENSIONS)})")
         return ([os.fspath(f) for f in files],
-                [read_shape(f, threshold=threshold, nodes=nodes) for f in files])
+                [read_shape(f, **read) for f in files])
     ext = path.suffix.lower()
     if not path.exists() or path.stat().st_size == 0 or ext not in (*_ARRAY, *_TEXT,
                                                                     ".tif", ".tiff"):
-        return [name], [read_shape(path, threshold=threshold, nodes=nodes)]
+        return [name], [read_shape(path, **read)]
     if ext in (".tif", ".tiff"):
         pages = _tiff_pages(path, name)
         if len(pages) == 1:
-            return [name], [read_shape(path, threshold=threshold, nodes=nodes)]
-        return _image_frames(pages, f"{name}[page {{}}]", threshold, nodes)
+            return [name], [read_shape(path, **read)]
+        return _image_frames(pages, f"{name}[page {{}}]", read)
     if ext in _TEXT:
-        return _csv_frames(path, name, nodes)
+        return _csv_frames(path, name, read["nodes"])
     array = _load_npy(path, name) if ext == ".npy" else _npz_arrays(path, name)[0]
     array = array.astype(np.uint8) if array.dtype == bool else array  # a stack of masks
     if array.dtype.kind not in "iuf":
         raise ValueError(f"{name}: the array must be numeric, got dtype {array.dtype}")
     if array.ndim != 3:
-        return [name], [read_shape(path, threshold=threshold, nodes=nodes)]
+        return [name], [read_shape(path, **read)]
     if array.shape[-1] in (2, 3):  # (F, n, d): F shapes
-        if threshold is not None:
+        if read["threshold"] is not None:
             raise ValueError(f"{name}: threshold= applies to images, not to an (F, n, "
                              f"{array.shape[-1]}) array of points")
         names = [f"{name}[{f}]" for f in range(len(array))]
-        return names, [_make_shape(n, a, nodes=nodes) for n, a in zip(names, array,
-                                                                       strict=True)]
-    return _image_frames(list(array), f"{name}[{{}}]", threshold, nodes)
+        return names, [_make_shape(n, a, nodes=read["nodes"])
+                       for n, a in zip(names, array, strict=True)]
+    return _image_frames(list(array), f"{name}[{{}}]", read)
 
 
 def _tiff_pages(path: Path, name: str) -> list:
@@ -1186,11 +1328,15 @@ def _tiff_pages(path: Path, name: str) -> list:
         raise ValueError(f"{name}: cannot read the image: {exc}") from None
 
 
-def _image_frames(images, pattern: str, threshold, nodes):
+def _image_frames(images, pattern: str, read: dict):
+    """(names, shapes) of a stack of images (pages, or an (F, H, W) array): in pixels, y
+    down, with no image file to draw under them."""
     names = [pattern.format(f) for f in range(len(images))]
-    shapes = [_make_shape(n, _image_contour(np.asarray(g), n, threshold),
-                          nodes=nodes or DEFAULT_NODES) for n, g in zip(names, images,
-                                                                          strict=True)]
+    shapes = []
+    for n, g in zip(names, map(np.asarray, images), strict=True):
+        pts = _image_contour(g, n, read["threshold"], read["object"])
+        shapes.append(_make_shape(n, pts, nodes=read["nodes"] or DEFAULT_NODES,
+                                  frame=ImageFrame(size=g.shape)))
     return names, shapes
 
 
@@ -1221,7 +1367,8 @@ def _csv_frames(path: Path, name: str, nodes):
                    for n, v in zip(names, values, strict=True)]
 
 
-def save_track(track, out_dir) -> None:
+def save_track(track, out_dir, *, options: dict | None = None,
+               input_files: list | None = None) -> None:
     """Write a :class:`modalmorph.Track` into ``out_dir``, one file at a time (wrap the
     call in :func:`atomic_output_dir` for all or nothing).
 
@@ -1232,6 +1379,8 @@ def save_track(track, out_dir) -> None:
         ``crossed`` (F,).
     ``track.json``
         ``modalmorph_version``, ``parameters``, ``inputs`` (frame names), ``nodes``,
+        ``input_files`` (each file's ``path`` and ``sha256``, when given), ``options``
+        (every option of the run by flat name, when given), ``nodes``,
         ``dim``, ``closure_error`` (or null) and ``frames``: per frame ``name``,
         ``observed_nodes``, ``steps``, ``converged``, ``energy``, ``cumulative_energy``,
         ``strain``, ``segment_strain``, ``distance``, ``crossed`` (frame 0: no morph,
@@ -1239,7 +1388,7 @@ def save_track(track, out_dir) -> None:
     ``strain_segments.csv``
         One row per frame: ``frame,global,segment_1,...,segment_S``.
     """
-    from . import __version__
+
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -1255,7 +1404,8 @@ def save_track(track, out_dir) -> None:
             "segment_strain": _finite_or_none(track.segment_strain[f]),
             "distance": float(track.distance[f]), "crossed": bool(track.crossed[f])})
     summary = {"modalmorph_version": __version__, "parameters": track.params,
-               "inputs": list(track.names), "nodes": int(track.points.shape[1]),
+               "inputs": list(track.names), "input_files": list(input_files or []),
+               "options": dict(options or {}), "nodes": int(track.points.shape[1]),
                "dim": int(track.points.shape[2]), "closure_error": track.closure_error,
                "frames": frames}
     text = json.dumps(summary, indent=2, default=_json_default, allow_nan=False)

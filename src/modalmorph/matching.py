@@ -35,9 +35,9 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from .align import Similarity, align
-from .element import FEModel
 from .errors import OptionError, ShapeError
 from .match3d import refine
+from .model import FEModel
 from .options import METHODS, ROTATIONS, MatchOptions
 from .quality import area
 from .shape import Shape, as_shape, resample, spread_indices
@@ -162,6 +162,8 @@ class Matching:
         target, from Horn's method on the final pairs; ``None`` otherwise.
     shape : tuple of int
         ``(m, n)``, the node counts of source and target.
+    options : MatchOptions or None
+        The options of the call that found them (recorded with a morph's parameters).
     """
 
     pairs: np.ndarray
@@ -171,6 +173,7 @@ class Matching:
     sigma: float | None
     similarity: Similarity | None
     shape: tuple
+    options: MatchOptions | None = None
 
     @property
     def source(self) -> np.ndarray:
@@ -1030,4 +1033,5 @@ def match(source, target, *, options: MatchOptions | None = None, **overrides) -
                                                                        opts)
     order = np.argsort(pairs[:, 0], kind="stable")
     return Matching(pairs=pairs[order].astype(np.intp), cost=cost[order], method=opts.method,
-                    modes=n_modes, sigma=opts.sigma, similarity=sim, shape=(src.m, tgt.m))
+                    modes=n_modes, sigma=opts.sigma, similarity=sim, shape=(src.m, tgt.m),
+                    options=opts)

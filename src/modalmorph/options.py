@@ -27,11 +27,13 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from numbers import Integral, Real
 
 from .dynamics import UNMATCHED_RULES, check_newmark
-from .element import MAX_SIGMA, MIN_SIGMA, SOLVERS
+from .element import MAX_SIGMA, MIN_SIGMA
 from .errors import OptionError
 from .material import MATERIALS, POLYETHYLENE, Material
+from .solvers import SOLVERS
 
-__all__ = ["MatchOptions", "MorphOptions", "ReadOptions", "OutputOptions", "OPTION_CLASSES",
+__all__ = ["MatchOptions", "MorphOptions", "ReadOptions", "OutputOptions", "AlignOptions",
+           "TrackOptions", "OPTION_CLASSES", "REFERENCES", "CORRESPONDENCES",
            "flat_fields", "split", "parse_value", "METHODS", "ROTATIONS", "FREE_MOTIONS",
            "LOADS", "SCHEMES", "OBJECTS", "FRAME_SPACINGS", "K_RANGE", "DT_RANGE", "C_MAX"]
 
@@ -42,6 +44,8 @@ LOADS = ("consistent", "nodal")
 SCHEMES = ("implicit", "explicit")
 OBJECTS = ("largest", "center")  # or a label number of the image's objects
 FRAME_SPACINGS = ("time", "path")
+REFERENCES = ("previous", "first")
+CORRESPONDENCES = ("nearest", "modal")
 # Option ranges beyond which the integration is meaningless or overflows (the fuzz suite
 # found dt = 1e-300 dividing by zero in Newmark's coefficients and c_x = 1e300 overflowing):
 # k and dt over 12 decades about their defaults; c_x, c_v are fractions of the way (17),
@@ -276,7 +280,9 @@ class ReadOptions(_Options):
 class OutputOptions(_Options):
     """What the command line writes besides the results (``result.json``, the shapes)."""
 
-    figures: bool = _opt(True, "the PNG and SVG figures", group="outputs", kind="bool")
+    figures: bool = _opt(True, "the PNG figures", group="outputs", kind="bool")
+    svg: bool = _opt(False, "the figures also as SVG (vector graphics; costs as much again "
+                     "as the PNGs)", group="outputs", kind="bool")
     gif: bool = _opt(True, "the animation as a GIF", group="outputs", kind="bool")
     mp4: bool = _opt(False, "also the animation as an MP4 (needs ffmpeg)", group="outputs",
                      kind="bool")
@@ -290,6 +296,50 @@ class OutputOptions(_Options):
         "time", "frames of the animation and the figures: time (every time step) or path "
         "(evenly spaced along the path, as the damped motion bunches steps near the "
         "target)", group="outputs", kind="str", choices=FRAME_SPACINGS)
+
+
+@dataclass(frozen=True)
+class AlignOptions(_Options):
+    """Whether :func:`modalmorph.morph` removes the rigid part first (method.md §3)."""
+
+    remove_rigid: bool = _opt(
+        False, "remove rotation, translation and scale first (Horn): morph only the "
+        "non-rigid part, in fewer steps", group="alignment", kind="bool")
+
+    def _check(self):
+        if not isinstance(self.remove_rigid, bool):
+            raise OptionError(f"remove_rigid must be true or false, got {self.remove_rigid!r}")
+
+
+@dataclass(frozen=True)
+class TrackOptions(_Options):
+    """How :func:`modalmorph.track` follows a sequence."""
+
+    reference: str = _opt(
+        "previous", "previous: morph each tracked frame onto the next (small steps); "
+        "first: morph frame 0 straight onto every frame", group="sequence", kind="str",
+        choices=REFERENCES)
+    correspondence: str = _opt(
+        "nearest", "nearest: in the frames' common frame each observed node pulls at most "
+        "one node, the nearest of those whose nearest it is (consecutive frames, motions "
+        "under the node spacing); modal: modal matching (large motions between frames)",
+        group="sequence", kind="str", choices=CORRESPONDENCES)
+    cycle: bool = _opt(
+        False, "periodic sequence (a cardiac cycle): also morph the last frame back onto "
+        "the first and report the closure error", group="sequence", kind="bool")
+    segments: int = _opt(
+        6, "segments of equal arc length for the strain table (6: those of a left-"
+        "ventricle short-axis slice)", group="sequence", kind="int")
+    start_node: int = _opt(
+        0, "node of the first frame where segment 1 starts", group="sequence", kind="int")
+
+    def _check(self):
+        if not isinstance(self.cycle, bool):
+            raise OptionError(f"cycle must be true or false, got {self.cycle!r}")
+        for name, low in (("segments", 1), ("start_node", 0)):
+            value = getattr(self, name)
+            if not (_is_int(value) and value >= low):
+                raise OptionError(f"{name} must be an integer >= {low}, got {value!r}")
 
 
 OPTION_CLASSES = (ReadOptions, MatchOptions, MorphOptions, OutputOptions)

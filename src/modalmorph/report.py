@@ -17,6 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .io import atomic_write
+from .version import __version__
+
 __all__ = ["image_data", "image_size", "input_images", "render_page", "result_payload",
            "write_html"]
 
@@ -103,7 +106,7 @@ def result_payload(result, *, title: str | None = None, images: dict | None = No
         (T+1, m, d); for a track ``frames`` (the observed object of every frame).
         Non-finite numbers are None.
     """
-    from . import __version__
+
 
     is_track = hasattr(result, "morphs")
     shapes = np.asarray(result.points if is_track else result.shapes, dtype=np.float64)
@@ -170,8 +173,6 @@ def write_html(result, path, *, title: str | None = None, images: dict | None = 
     -------
     Path
     """
-    from .io import atomic_write
-
     path = Path(path)
     text = render_page(result_payload(result, title=title, images=images))
     with atomic_write(path) as tmp:

@@ -8,7 +8,7 @@ from functools import cached_property
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["Shape", "as_shape", "coarsen", "resample", "spread_indices"]
+__all__ = ["ImageFrame", "Shape", "as_shape", "coarsen", "resample", "spread_indices"]
 
 # Two nodes closer than this fraction of the object's RMS radius are "the same node".
 _REPEAT_TOL = 1e-9
@@ -17,6 +17,33 @@ _REPEAT_TOL = 1e-9
 MAX_COORDINATE = 1e150
 # An object whose RMS radius is below this fraction of its coordinates' magnitude is a point.
 _POINT_TOL = 1e-10
+
+
+@dataclass(frozen=True)
+class ImageFrame:
+    """Image coordinates: where a shape's numbers come from, for drawing it.
+
+    Shapes read from images and SVG (and the bundled real data, traced on images) have
+    ``(x, y) = (column, row)`` in pixels, y pointing down; figures draw them that way, over
+    the image when there is one.
+
+    Attributes
+    ----------
+    unit : str
+        Unit of the coordinates, for axis labels (``"px"``, ``"SVG user units"``).
+    image : str or None
+        The image file the shape was traced on (drawn under it), if any.
+    size : (int, int) or None
+        ``(height, width)`` of that image in pixels; pixel ``(r, c)`` covers
+        ``[c - 0.5, c + 0.5] x [r - 0.5, r + 0.5]``.
+    y_down : bool
+        Whether y points down (image rows), as in every image format.
+    """
+
+    unit: str = "px"
+    image: str | None = None
+    size: tuple[int, int] | None = None
+    y_down: bool = True
 
 
 @dataclass(frozen=True, eq=False)
@@ -36,6 +63,10 @@ class Shape:
         Defaults to ``True`` in 2D and to ``False`` in 3D.
     faces : array_like of int, shape (f, 3), optional
         Triangles of a 3D surface (indices into ``points``).
+    frame : ImageFrame, optional
+        For shapes in image coordinates (read from an image or SVG): their unit,
+        orientation (y down) and source image, used by the figures. None: plain
+        coordinates in the input's units, y up.
 
     Raises
     ------
@@ -48,6 +79,7 @@ class Shape:
     closed: bool = True
     ordered: bool | None = None
     faces: np.ndarray | None = field(default=None)
+    frame: ImageFrame | None = None
 
     def __post_init__(self):
         pts = _validate_points(self.points, "points")
@@ -66,6 +98,8 @@ class Shape:
             faces = faces.astype(np.intp)
             faces.setflags(write=False)
             object.__setattr__(self, "faces", faces)
+        if self.frame is not None and not isinstance(self.frame, ImageFrame):
+            raise ValueError(f"frame must be an ImageFrame or None, got {self.frame!r}")
 
     @property
     def m(self) -> int:
@@ -113,8 +147,9 @@ class Shape:
         return (np.asarray(points, dtype=np.float64) - self.centroid) / self.size
 
     def with_points(self, points: np.ndarray) -> Shape:
-        """The same topology (closed, ordered, faces) on other node coordinates."""
-        return Shape(points, closed=self.closed, ordered=self.ordered, faces=self.faces)
+        """The same topology (closed, ordered, faces) and frame on other node coordinates."""
+        return Shape(points, closed=self.closed, ordered=self.ordered, faces=self.faces,
+                     frame=self.frame)
 
 
 def _validate_points(points, name: str) -> np.ndarray:

@@ -11,28 +11,26 @@ frame 0 (for a closed left-ventricle contour, the circumferential strain).
 
 from __future__ import annotations
 
-import inspect
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import asdict, dataclass, field
+from functools import partial
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .errors import MorphDivergedError, OptionError, ShapeError
 from .matching import match
-from .options import MatchOptions
-from .pipeline import Morph, MorphDivergedError, morph
+from .options import CORRESPONDENCES, REFERENCES, MatchOptions, MorphOptions, TrackOptions
+from .pipeline import Morph, morph
 from .quality import curve_distances, self_crossings
 from .shape import Shape, as_shape
 
-__all__ = ["REFERENCES", "CORRESPONDENCES", "Track", "track", "curve_distance"]
+__all__ = ["REFERENCES", "CORRESPONDENCES", "Track", "TrackOptions", "track",
+           "curve_distance"]
 
 log = logging.getLogger(__name__)
 
-REFERENCES = ("previous", "first")
-CORRESPONDENCES = ("nearest", "modal")
-# morph() options that track() sets itself, per frame.
-_OWN = ("source", "target", "matching", "progress")
 
 
 @dataclass(frozen=True, eq=False)
@@ -116,53 +114,32 @@ class Track:
         return self.frames[0].with_points(self.points[f])
 
 
-def track(frames, *, reference: str = "previous", correspondence: str = "nearest",
-          cycle: bool = False, segments: int = 6, start_node: int = 0,
-          names: Sequence[str] | None = None, match_options: dict | None = None,
-          morph_options: dict | None = None,
-          progress: Callable[[int, int], None] | None = None) -> Track:
+def track(frames, *, options: TrackOptions | None = None,
+          names: Sequence[str] | None = None, match_options: MatchOptions | dict | None = None,
+          morph_options: MorphOptions | dict | None = None,
+          progress: Callable[[int, int], None] | None = None, **overrides) -> Track:
     """Follow the nodes of frame 0 through a sequence of observed objects.
 
-    Each frame ``f`` is reached by morphing the tracked shape of frame ``f - 1`` onto the
-    observed object of frame ``f`` (:func:`modalmorph.morph`), so node ``i`` keeps its
-    identity through the whole sequence and every frame is fitted to its own data (no
-    drift away from the contours).
+    Frame ``f`` is reached by morphing the tracked frame ``f - 1`` (or frame 0) onto the
+    observed frame ``f`` (:func:`modalmorph.morph`): node ``i`` keeps its identity and
+    every frame is fitted to its own data (no drift away from the contours).
 
     Parameters
     ----------
     frames : sequence of Shape or array_like (n_f, d)
-        The observed objects in time order, at least 2, all 2D or all 3D, in one common
-        frame of reference (the images' coordinates); node counts may differ. Frame 0's
-        nodes are the ones tracked.
-    reference : {"previous", "first"}, optional
-        ``"previous"`` (default): morph the tracked frame ``f - 1`` onto frame ``f``
-        (small steps). ``"first"``: morph frame 0 straight onto every frame.
-    correspondence : {"nearest", "modal"}, optional
-        How the morphed nodes are paired with the observed frame. ``"nearest"`` (default):
-        in the common frame, each observed node is paired with at most one node, the
-        nearest of those whose nearest observed node it is; the other nodes follow the
-        morph's rule for unmatched nodes (spread by arc length along the contour), so the
-        node spacing stays even. Suited to consecutive frames, where nodes move by less
-        than the node spacing. ``"modal"``: :func:`modalmorph.match` (modal matching),
-        for large motions between frames; ``match_options`` are passed to it.
-    cycle : bool, optional
-        The sequence is periodic (a cardiac cycle): also morph the last tracked frame back
-        onto frame 0 and report how far the nodes land from where they started
-        (``closure_error``).
-    segments : int, optional
-        Number of segments of equal arc length for ``segment_strain`` (default 6, the
-        segments of a left-ventricle short-axis slice).
-    start_node : int, optional
-        Node of frame 0 where the first segment starts.
+        At least 2 objects in time order, all 2D or all 3D, in one common frame of
+        reference (the images' coordinates); node counts may differ.
+    options : TrackOptions, optional
+        How the sequence is followed (reference, correspondence, cycle, segments).
     names : sequence of str, optional
-        A name per frame (e.g. file names) for messages; default ``"frame <i>"``.
-    match_options : dict, optional
-        Keyword arguments of :func:`modalmorph.match` (``correspondence="modal"``).
-    morph_options : dict, optional
-        Keyword arguments of :func:`modalmorph.morph` (``k``, ``dt``, ``model_nodes``,
-        ...), the same for every frame.
+        A name per frame for messages (default ``"frame <i>"``).
+    match_options, morph_options : MatchOptions, MorphOptions or dict, optional
+        The matcher's (``correspondence="modal"`` only) and the morph's options; dicts of
+        their fields are converted (``morph_options`` may also hold ``remove_rigid``).
     progress : callable, optional
         Called after each frame as ``progress(frame, n_frames)``.
+    **overrides
+        :class:`TrackOptions` fields (``reference="first"``, ``cycle=True``, ...).
 
     Returns
     -------
@@ -171,21 +148,96 @@ def track(frames, *, reference: str = "previous", correspondence: str = "nearest
     Raises
     ------
     ValueError
-        For invalid options, or a frame that cannot be tracked; the message names the
-        frame (index and name).
+        Invalid options, or a frame that cannot be tracked (the message names it).
     """
-    if reference not in REFERENCES:
-        raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
-    if correspondence not in CORRESPONDENCES:
-        raise ValueError(f"correspondence must be one of {CORRESPONDENCES}, "
-                         f"got {correspondence!r}")
-    if isinstance(segments, bool) or not isinstance(segments, int | np.integer) \
-            or segments < 1:
-        raise ValueError(f"segments must be a positive integer, got {segments!r}")
-    match_kw = _options(match_options, match, (), "match_options")
-    if match_kw and correspondence != "modal":
-        raise ValueError("match_options apply to correspondence='modal' only")
-    morph_kw = _options(morph_options, morph, _OWN, "morph_options")
+    opts = _track_options(options, overrides)
+    match_opts = _match_options(match_options, opts.correspondence)
+    morph_opts = _morph_options(morph_options)
+    shapes, names = _frames(frames, names, opts.start_node)
+    step = partial(_morph_frame, names=names, match_options=match_opts,
+                   morph_options=morph_opts)
+    morphs = _follow(shapes, opts.reference, step, progress)
+    first = shapes[0]
+    points = np.array([first.points, *[r.shapes[-1] for r in morphs]])
+    closure = step(first.with_points(points[-1]), first, 0) if opts.cycle else None
+    params = dict(asdict(opts), segments=opts.segments if first.ordered else 0,
+                  start_node=int(opts.start_node),
+                  match_options={} if match_opts is None else match_opts.record(),
+                  morph=morphs[0].params)
+    return _result(shapes, names, points, morphs, closure, params)
+
+
+def _track_options(options, overrides: dict) -> TrackOptions:
+    if options is None:
+        options = TrackOptions()
+    elif not isinstance(options, TrackOptions):
+        raise OptionError(f"options must be a TrackOptions, got {type(options).__name__}")
+    return options.replace(**overrides)
+
+
+def _follow(shapes, reference: str, step, progress) -> list:
+    """The morphs onto frames 1, 2, ...: each from the tracked previous frame (or frame
+    0), ``step(source, target, f)``."""
+    first, morphs = shapes[0], []
+    for f in range(1, len(shapes)):
+        source = first if reference == "first" or not morphs else \
+            first.with_points(morphs[-1].shapes[-1])
+        morphs.append(step(source, shapes[f], f))
+        if progress is not None:
+            progress(f, len(shapes))
+    return morphs
+
+
+def _morph_frame(source: Shape, target: Shape, f: int, *, names: tuple,
+                 match_options: MatchOptions | None, morph_options: tuple) -> Morph:
+    """One frame's morph: pairs (nearest, or modal with ``match_options``), then
+    :func:`modalmorph.morph`; errors name the frame."""
+    options, remove_rigid = morph_options
+    try:
+        pairs = (_nearest_pairs(source.normalized, target.normalized)
+                 if match_options is None else match(source, target, options=match_options))
+        return morph(source, target, matching=pairs, remove_rigid=remove_rigid,
+                     options=options)
+    except (ValueError, MorphDivergedError) as exc:
+        raise ValueError(f"frame {f} ({names[f]}): {exc}") from exc
+
+
+def _match_options(value, correspondence: str) -> MatchOptions | None:
+    """The matcher's options for ``correspondence="modal"``, None for ``"nearest"``."""
+    if value is None or isinstance(value, dict) and not value:
+        return MatchOptions() if correspondence == "modal" else None
+    if correspondence != "modal":
+        raise OptionError("match_options apply to correspondence='modal' only")
+    if isinstance(value, MatchOptions):
+        return value
+    if not isinstance(value, dict):
+        raise OptionError(f"match_options must be a MatchOptions or a dict, "
+                          f"got {type(value).__name__}")
+    try:
+        return MatchOptions().replace(**value)
+    except OptionError as exc:
+        raise OptionError(f"match_options: {exc}") from None
+
+
+def _morph_options(value) -> tuple[MorphOptions, bool]:
+    """The morph's options and ``remove_rigid`` (a dict may hold it)."""
+    if value is None:
+        return MorphOptions(), False
+    if isinstance(value, MorphOptions):
+        return value, False
+    if not isinstance(value, dict):
+        raise OptionError(f"morph_options must be a MorphOptions or a dict, "
+                          f"got {type(value).__name__}")
+    kw = dict(value)
+    remove_rigid = bool(kw.pop("remove_rigid", False))
+    try:
+        return MorphOptions().replace(**kw), remove_rigid
+    except OptionError as exc:
+        raise OptionError(f"morph_options: {exc}") from None
+
+
+def _frames(frames, names, start_node) -> tuple[list, tuple]:
+    """The frames as shapes (2D contours running the way frame 0 does) and their names."""
     if len(frames) < 2:
         raise ValueError(f"frames must hold at least 2 objects, got {len(frames)}")
     names = tuple(f"frame {i}" for i in range(len(frames))) if names is None else \
@@ -195,50 +247,31 @@ def track(frames, *, reference: str = "previous", correspondence: str = "nearest
                          f"got {len(names)}")
     shapes = [_frame(obj, f, names) for f, obj in enumerate(frames)]
     first = shapes[0]
-    if isinstance(start_node, bool) or not isinstance(start_node, int | np.integer) \
-            or not 0 <= start_node < first.m:
-        raise ValueError(f"start_node must be a node of frame 0 (0..{first.m - 1}), "
-                         f"got {start_node!r}")
+    if start_node >= first.m:
+        raise OptionError(f"start_node must be a node of frame 0 (0..{first.m - 1}), "
+                          f"got {start_node!r}")
     for f, shape in enumerate(shapes):
         if shape.dim != first.dim:
-            raise ValueError(f"frame {f} ({names[f]}) is {shape.dim}D but frame 0 "
+            raise ShapeError(f"frame {f} ({names[f]}) is {shape.dim}D but frame 0 "
                              f"({names[0]}) is {first.dim}D: all frames must have the "
                              f"same dimension")
         shapes[f] = _oriented(shape, first)
+    return shapes, names
 
-    def step(source: Shape, f: int, target: Shape) -> Morph:
-        try:
-            pairs = (_nearest_pairs(source.normalized, target.normalized)
-                     if correspondence == "nearest" else match(source, target, **match_kw))
-            return morph(source, target, matching=pairs, **morph_kw)
-        except (ValueError, MorphDivergedError) as exc:
-            raise ValueError(f"frame {f} ({names[f]}): {exc}") from exc
 
-    points, morphs = [first.points], []
-    for f in range(1, len(shapes)):
-        source = first if reference == "first" else first.with_points(points[-1])
-        morphs.append(step(source, f, shapes[f]))
-        points.append(morphs[-1].shapes[-1])
-        if progress is not None:
-            progress(f, len(shapes))
-    points = np.array(points)
-
-    closure = closure_error = None
-    if cycle:
-        closure = step(first.with_points(points[-1]), 0, first)
-        closure_error = float(np.linalg.norm(closure.shapes[-1] - first.points, axis=1).mean())
-
+def _result(shapes, names, points, morphs, closure, params) -> Track:
+    """The Track: energies of the morphs, strains of the tracked edges, distances."""
+    first = shapes[0]
     energy = np.r_[0.0, [r.energy[-1] for r in morphs]]
     node_energy = np.vstack([np.zeros(first.m), *[r.node_energy[-1] for r in morphs]])
     edges = _edges(first)
     lengths = np.linalg.norm(points[:, edges[:, 1]] - points[:, edges[:, 0]], axis=2)
-    seg = _segment_of_edge(first, edges, segments, int(start_node))
-    n_seg = segments if first.ordered else 0
+    n_seg = params["segments"]
+    seg = _segment_of_edge(first, edges, max(n_seg, 1), params["start_node"])
     seg_len = np.stack([lengths[:, seg == s].sum(axis=1) for s in range(n_seg)], axis=1) \
         if n_seg else np.zeros((len(points), 0))
-    params = dict(reference=reference, correspondence=correspondence, cycle=cycle,
-                  segments=n_seg, start_node=int(start_node), match_options=match_kw,
-                  morph=morphs[0].params)
+    closure_error = None if closure is None else float(
+        np.linalg.norm(closure.shapes[-1] - first.points, axis=1).mean())
     return Track(
         points=points, frames=tuple(shapes), names=names, morphs=tuple(morphs),
         energy=energy, node_energy=node_energy, cumulative_energy=np.cumsum(energy),
@@ -251,22 +284,6 @@ def track(frames, *, reference: str = "previous", correspondence: str = "nearest
                            for p, s in zip(points, shapes, strict=True)]),
         crossed=np.array([_crosses_itself(p, first) for p in points]),
         closure=closure, closure_error=closure_error, params=params)
-
-
-def _options(options: dict | None, func, own: tuple, name: str) -> dict:
-    """Check a dict of keyword options against ``func``'s keyword-only parameters."""
-    if options is None:
-        return {}
-    if not isinstance(options, dict):
-        raise ValueError(f"{name} must be a dict, got {type(options).__name__}")
-    known = [p.name for p in inspect.signature(func).parameters.values()
-             if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name not in own]
-    if func is match:  # match takes MatchOptions' fields by name
-        known = [f.name for f in fields(MatchOptions)]
-    unknown = sorted(set(options) - set(known))
-    if unknown:
-        raise ValueError(f"{name}: unknown option(s) {unknown}; known: {', '.join(known)}")
-    return dict(options)
 
 
 def _frame(obj, f: int, names: tuple) -> Shape:

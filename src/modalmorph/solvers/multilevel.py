@@ -1,14 +1,14 @@
 """Lowest modes of a large model without a sparse factorisation: coarse start + LOBPCG.
 
-The sparse solver (:func:`modalmorph.modes.solve_modes_sparse`) factorises
+The sparse solver (:func:`modalmorph.solvers.sparse.solve`) factorises
 ``K_g - s M_g``; for 3D point sets, where each node has some 200-300 neighbours within the
 cutoff radius, that factor does not fit in memory beyond a few thousand nodes. This solver
 only multiplies by the full model's sparse matrices:
 
 1. **Coarse start.** A model of the same object on ``coarse_nodes`` nodes
-   (:func:`modalmorph.shape.coarsen`, the dense or sparse solver) gives its lowest ``k``
+   (:meth:`FEModel.coarsened`, the dense or sparse solver) gives its lowest ``k``
    modes; their displacement fields, evaluated at the fine nodes
-   (:meth:`FEModel.modes_at`), are smooth, and so are the fine model's low modes in the
+   (:meth:`FEModel.field`), are smooth, and so are the fine model's low modes in the
    Gaussian basis: their span is the starting subspace.
 2. **Rayleigh-Ritz** with the full model's ``K_g`` and ``M_g = rho (I kron Gamma)``.
 3. **LOBPCG** (Knyazev's locally optimal block preconditioned conjugate gradient) on
@@ -23,8 +23,8 @@ The solver assembles its own matrices from them, on its own node order (the leav
 k-d tree, so that neighbours are close in memory): the blocks
 ``K_g^ab_ij = s_ij (-(lambda + mu) / 4 r_a r_b + delta_ab t_ij)`` (``r = x_j - x_i``,
 ``s_ij = Gamma_ij / sigma^4``, ``t_ij = (lambda + mu) sigma^2 / 2 + mu (d sigma^2 / 2 -
-|r|^2 / 4)``: :func:`modalmorph.element.stiffness_entries`) are symmetric in ``(a, b)``, so
-``K_g`` is its ``d (d + 1) / 2`` distinct scalar components (:func:`stiffness_components`),
+|r|^2 / 4)``: :func:`modalmorph.element.stiffness_components`) are symmetric in ``(a, b)``,
+so ``K_g`` is its ``d (d + 1) / 2`` distinct scalar components,
 six CSR data arrays in 3D over one index structure, and ``M_g`` is the scalar ``Gamma``
 over the same structure (never the d-fold block-diagonal copy);
 ``(K_g X)_a = sum_b K^ab X_b``.
@@ -33,7 +33,7 @@ block (BSR) product, and the rows are split into blocks that run on ``threads`` 
 (scipy's sparse products release the GIL). ``G`` is only needed for
 ``Phi = (I kron G) psi`` at the end: it is formed then from ``Gamma``'s entries, a block
 of rows at a time, after ``K_g`` is freed. A run that does not reach ``tol`` raises a
-ValueError: the solver never returns modes it has not checked.
+:class:`~modalmorph.errors.ModelError`: the solver never returns modes it has not checked.
 
 Measured (``benchmarks/scale.py``, 2 cores, ``OPENBLAS_NUM_THREADS=1``): 100k 3D nodes
 (198 neighbours each), lowest 50 modes in 25 s and 3.0 GB peak (3 iterations), against
@@ -60,15 +60,31 @@ import numpy as np
 from scipy import linalg, sparse
 from scipy.spatial import cKDTree
 
-__all__ = ["solve_modes_multilevel", "stiffness_components", "COARSE_NODES", "MULTILEVEL_TOL",
+from ..element import (
+    gaussian_from_overlap,
+    singular_gram,
+    stiffness_component_pairs,
+    stiffness_components,
+    stiffness_entries,
+)
+from ..errors import ModelError
+from ..modes import Modes
+
+__all__ = ["solve", "Operators", "COARSE_NODES", "MULTILEVEL_CUTOFF", "MULTILEVEL_TOL",
            "MULTILEVEL_MAXITER", "THREADS"]
 
 logger = logging.getLogger(__name__)
 
+# The multilevel solver's default cutoff: a radius of 8.1 sigma instead of 10.3, 190
+# neighbours per node of a 3D surface instead of 294; the lowest 60 frequencies of the
+# 2000-node benchmark ellipsoid move by 3e-6 relative (benchmarks/scale.py). 1e-4 leaves
+# Gamma indefinite there.
+MULTILEVEL_CUTOFF = 1e-6
+
 # Nodes of the coarse model that gives the starting subspace: its 3 * 1000 degrees of
 # freedom are solved densely in about a second (benchmarks/model.py).
 COARSE_NODES = 1000
-# Relative residual below which a mode counts as converged (see solve_modes_multilevel
+# Relative residual below which a mode counts as converged (see the module's docstring
 # for what it means for the frequencies, measured against the exact solvers).
 MULTILEVEL_TOL = 5e-2
 # LOBPCG iterations at most. Quasi-uniform nodes converge in a few (the benchmark blob:
@@ -105,15 +121,14 @@ def _guard(n: int) -> int:
     return max(8, n // 4)
 
 
-def solve_modes_multilevel(model, n: int, *, coarse_nodes: int = COARSE_NODES,
-                           tol: float = MULTILEVEL_TOL, maxiter: int = MULTILEVEL_MAXITER,
-                           threads: int = THREADS):
+def solve(model, n: int, *, coarse_nodes: int = COARSE_NODES, tol: float = MULTILEVEL_TOL,
+          maxiter: int = MULTILEVEL_MAXITER, threads: int = THREADS) -> Modes:
     """The lowest ``n`` modes of a large sparse model by a coarse start and LOBPCG.
 
     Parameters
     ----------
     model : FEModel
-        The full model (its pairs within ``model.cutoff_radius``).
+        The full model (its ``pairs``; ``model.coarsened`` gives the coarse one).
     n : int
         Number of modes.
     coarse_nodes : int, optional
@@ -135,66 +150,67 @@ def solve_modes_multilevel(model, n: int, *, coarse_nodes: int = COARSE_NODES,
 
     Raises
     ------
-    ValueError
-        When a mode's residual is still above ``tol`` when the iterations stop, or the
-        coarse model fails.
+    ModelError
+        When a residual is above ``tol`` when the iterations stop, or the coarse model fails.
     """
-    from .element import FEModel, _breakdown_message
-    from .modes import Modes
-    from .shape import coarsen
-
     d, m = model.dim, model.m
-    rho = model.material.rho
-    k = min(n + _guard(n), d * m // 2)
     clock = _Clock()
-
-    # 1. coarse start: displacement fields of the coarse modes at the fine nodes
-    coarse = coarsen(model.shape, min(coarse_nodes, m // 2))
-    cmodel = FEModel(coarse, sigma=model.sigma_rel, material=model.material,
-                     plane=model.plane, cutoff=model.cutoff)
-    kc = min(k, d * coarse.m - 2)
-    if kc <= n:
-        raise ValueError(f"the multilevel solver needs more than n={n} coarse modes; this "
-                         f"{m}-node shape is small enough for solver='sparse' or 'dense'")
-    cmodes = cmodel.modes(kc)
     # the solver's node order: leaves of a k-d tree, so that a node's neighbours are close
     # in memory and the preconditioner's patches are consecutive nodes
     order = cKDTree(model.points, leafsize=8).indices
     threads = max(1, int(threads))
     with ThreadPoolExecutor(threads) as pool:
-        V = _coarse_fields(cmodel, cmodes, coarse.to_normalized(model.shape.points[order]),
-                           pool)
-        del cmodes, cmodel
+        start = [_coarse_start(model, n, coarse_nodes, order, pool)]
         clock("coarse start")
-        ops = _Operators(model, order, pool, threads)
+        ops = Operators(model, order, pool, threads)
         clock("K_g and Gamma")
         # dense products (BLAS) on the threads too, unless BLAS runs threads of its own:
         # concurrent calls into a multithreaded OpenBLAS are several times slower
         dense = threads if _blas_single_threaded() else 1
         precondition = _patch_preconditioner(model, order, pool, dense)
         clock("preconditioner")
-        start = [V]  # the solver frees V once it is used
-        del V
-        w2, psi, res, its = _lobpcg(ops.stiffness, ops.mass, precondition, start, n, tol,
-                                    maxiter, _Rows(pool, dense, d * m), clock)
+        w2, psi, res, its = _lobpcg(ops, precondition, start, n, tol, maxiter,
+                                    _Rows(pool, dense, d * m), clock)
         del precondition
-        if not np.all(res[:n] <= tol):
-            bad = int(np.argmax(res[:n]))
-            raise ValueError(
-                f"the multilevel solver did not converge for this {m}-node shape: mode "
-                f"{bad} has relative residual {res[bad]:.1e} > tol={tol:g} after {its} "
-                f"iterations ({'stalled' if its < maxiter else 'maxiter'}); raise maxiter or "
-                f"coarse_nodes, or use solver='sparse' on fewer nodes. "
-                + (_breakdown_message(model) if not np.all(np.isfinite(res)) else ""))
-        psi = psi[:, :n] / np.sqrt(rho)  # psi^T (rho M_g) psi = I
+        _check_converged(model, res[:n], tol, its, maxiter)
+        psi = psi[:, :n]
         ops.drop_stiffness()
         phi = ops.gram(psi)  # Phi = (I kron G) psi, G assembled a block of rows at a time
         clock("Phi")
     logger.info("multilevel: %d modes of %d nodes in %d iterations, max residual %.1e",
                 n, m, its, res[:n].max())
-    return Modes(frequencies=np.sqrt(np.clip(w2[:n] / rho, 0.0, None)),
-                 shapes=_model_order(phi, order, d), gaussian=_model_order(psi, order, d),
-                 dim=d)
+    return Modes.unit_density(w2[:n], _model_order(psi, order, d), _model_order(phi, order, d),
+                              model.material.rho, d)
+
+
+def _coarse_start(model, n: int, coarse_nodes: int, order: np.ndarray,
+                  pool: ThreadPoolExecutor) -> np.ndarray:
+    """The starting block (d*m, kc): the lowest ``kc`` modes (``n`` and the guard) of a
+    model of the same object on at most ``coarse_nodes`` nodes, as displacement fields at
+    the fine nodes (in the solver's node order)."""
+    cmodel = model.coarsened(min(coarse_nodes, model.m // 2))
+    k = min(n + _guard(n), model.dim * model.m // 2)
+    kc = min(k, cmodel.dim * cmodel.m - 2)
+    if kc <= n:
+        raise ModelError(f"the multilevel solver needs more than n={n} coarse modes; this "
+                         f"{model.m}-node shape is small enough for solver='sparse' or "
+                         f"'dense'")
+    points = cmodel.shape.to_normalized(model.shape.points[order])
+    return _coarse_fields(cmodel, cmodel.modes(kc), points, pool)
+
+
+def _check_converged(model, res: np.ndarray, tol: float, its: int, maxiter: int) -> None:
+    """Raise unless every wanted mode's residual ``res`` is below ``tol``."""
+    if np.all(res <= tol):
+        return
+    bad = int(np.argmax(res))
+    singular = (" " + str(singular_gram(model.shape, model.sigma_rel))
+                if not np.all(np.isfinite(res)) else "")
+    raise ModelError(
+        f"the multilevel solver did not converge for this {model.m}-node shape: mode {bad} "
+        f"has relative residual {res[bad]:.1e} > tol={tol:g} after {its} iterations "
+        f"({'stalled' if its < maxiter else 'maxiter'}); raise maxiter or coarse_nodes, or "
+        f"use solver='sparse' on fewer nodes.{singular}")
 
 
 def _blas_single_threaded() -> bool:
@@ -237,54 +253,15 @@ def _model_order(X: np.ndarray, order: np.ndarray, d: int) -> np.ndarray:
     return out
 
 
-def _node_major(X: np.ndarray, d: int, m: int) -> np.ndarray:
-    return np.ascontiguousarray(X.reshape(d, m, -1).transpose(1, 0, 2).reshape(d * m, -1))
-
-
-def _component_major(X: np.ndarray, d: int, m: int) -> np.ndarray:
-    return np.ascontiguousarray(X.reshape(m, d, -1).transpose(1, 0, 2).reshape(d * m, -1))
-
-
-def stiffness_components(r: np.ndarray, sigma: float, lam: float,
-                         mu: float) -> list[np.ndarray]:
-    """The distinct entries of the stiffness blocks ``K_g^ab`` for offsets ``r`` (p, d):
-    ``[K^00, K^11, ..., K^01, K^02, ..., K^12, ...]`` (the d diagonal components, then
-    ``a < b``; ``K^ab = K^ba``), each (p,). The same numbers as
-    :func:`modalmorph.element.stiffness_entries`, without its (p, d, d) array."""
-    return _entries(r, sigma, lam, mu)[0]
-
-
-def _entries(r: np.ndarray, sigma: float, lam: float, mu: float):
-    """:func:`stiffness_components` and ``Gamma`` (as in
-    :func:`modalmorph.element.gram_entries`) for offsets ``r`` (p, d), one exponential."""
-    d = r.shape[-1]
-    r2 = np.einsum("...a,...a->...", r, r)
-    gamma = (np.pi * sigma**2) ** (d / 2) * np.exp(-r2 / (4 * sigma**2))
-    scale = gamma / sigma**4
-    diag = (lam + mu) * sigma**2 / 2 + mu * (d * sigma**2 / 2 - r2 / 4)
-    del r2
-    out = []
-    for a, b in _components(d):
-        v = (-(lam + mu) / 4) * r[:, a] * r[:, b]
-        if a == b:
-            v += diag
-        v *= scale
-        out.append(v)
-    return out, gamma
-
-
-def _components(d: int) -> list[tuple[int, int]]:
-    return [(a, a) for a in range(d)] + [(a, b) for a in range(d) for b in range(a + 1, d)]
-
-
-class _Operators:
+class Operators:
     """The full model's ``K_g`` and ``Gamma`` on the solver's node order, for blocks
     ``X`` of shape (d*m, c), component-major.
 
     ``K_g`` is stored as its ``d (d + 1) / 2`` distinct scalar m x m components
-    ``K^ab`` (:func:`stiffness_components`), ``Gamma`` as one more, all over one sparse
-    structure (the pairs within the cutoff and the diagonal). The rows are split into
-    ``threads`` blocks of about equal nonzeros, each with its own index arrays; a product
+    ``K^ab`` (:func:`modalmorph.element.stiffness_components`), ``Gamma`` as one more, all
+    over one sparse structure (the pairs within the cutoff and the diagonal). The rows are
+    split into ``threads`` blocks of about equal nonzeros, each with its own index arrays;
+    a product
     runs one block per thread (scipy's sparse products release the GIL), each block
     computing ``(K X)_a = sum_b K^ab X_b`` for its rows.
     """
@@ -316,7 +293,7 @@ class _Operators:
             self.blocks.append((int(r0), int(r1), indptr[r0:r1 + 1] - p0,
                                 indices[p0:p1].copy()))
         del indptr, indices
-        comps = _components(d)
+        comps = stiffness_component_pairs(d)
         self.index = {}
         for q, (a, b) in enumerate(comps):
             self.index[a, b] = self.index[b, a] = q
@@ -325,7 +302,7 @@ class _Operators:
             r0, r1, bptr, bidx = block
             data = [np.empty(len(bidx)) for _ in range(len(comps) + 1)]
             for s0, s1, r in _chunks(x, r0, bptr, bidx):
-                values, data[-1][s0:s1] = _entries(r, self.sigma, lam, mu)
+                values, data[-1][s0:s1] = stiffness_components(r, self.sigma, lam, mu)
                 for q, v in enumerate(values):
                     data[q][s0:s1] = v
             return [sparse.csr_array((v, bidx, bptr), shape=(r1 - r0, m)) for v in data]
@@ -375,17 +352,16 @@ class _Operators:
         self.K = None
 
     def gram(self, X: np.ndarray) -> np.ndarray:
-        """``(I kron G) X``, G from Gamma's entries: ``G_ij = (Gamma_ij / Gamma_ii)^2``
-        (gram_entries), one block of rows at a time."""
+        """``(I kron G) X``, G from Gamma's entries
+        (:func:`modalmorph.element.gaussian_from_overlap`), one block of rows at a time."""
         d, m = self.d, self.m
         Xs = X.reshape(d, m, -1)
         Y = np.empty_like(Xs)
-        volume = (np.pi * self.sigma**2) ** (d / 2)
 
         def work(t):
             r0, r1, bptr, bidx = self.blocks[t]
-            G = sparse.csr_array((np.square(self.Gamma[t].data / volume), bidx, bptr),
-                                 shape=(r1 - r0, m))
+            G = sparse.csr_array((gaussian_from_overlap(self.Gamma[t].data, self.sigma, d),
+                                  bidx, bptr), shape=(r1 - r0, m))
             for a in range(d):
                 Y[a, r0:r1] = G @ Xs[a]
 
@@ -415,8 +391,6 @@ def _patch_preconditioner(model, order: np.ndarray, pool: ThreadPoolExecutor,
     component-major blocks. Each patch's inverse Cholesky factor ``L^-1`` is stored and
     the solves are batched products ``L^-T (L^-1 R)``, batches of patches over the
     threads."""
-    from .element import stiffness_entries
-
     d, m = model.dim, model.m
     lam, mu = model.lame
     x = model.points[order]
@@ -568,12 +542,14 @@ class _Rows:
         self.each(part)
 
 
-def _lobpcg(K, apply_m, precondition, V, n, tol, maxiter, rows, clock=None):
+def _lobpcg(ops, precondition, V, n, tol, maxiter, rows, clock):
     """LOBPCG for the lowest ``n`` eigenpairs of ``(K, M)``, block ``V[0].shape[1]``,
     started from the span of ``V[0]`` (a list, emptied here so that the block is freed
-    once used). ``K`` and ``apply_m`` are functions; ``rows`` a :class:`_Rows`. Products
+    once used). ``ops.stiffness`` and ``ops.mass`` apply K and M (an :class:`Operators`),
+    ``rows`` is a :class:`_Rows` and ``clock`` a :class:`_Clock`. Products
     with K and M are done once per new block and carried through the Ritz updates, in
     place. Returns ``(w2, X, residuals, iterations)``."""
+    K, apply_m = ops.stiffness, ops.mass
     V = V.pop()
     k = V.shape[1]
     KV, MV = K(V), apply_m(V)
@@ -587,8 +563,7 @@ def _lobpcg(K, apply_m, precondition, V, n, tol, maxiter, rows, clock=None):
     for it in range(maxiter + 1):
         # relative residuals ||K x - w2 M x|| / (w2 ||M x||), without the block K X - M X w2
         res = rows.norms(KX, w2, MX) / (np.abs(w2) * rows.norms(MX))
-        if clock is not None:
-            clock(f"LOBPCG {it}")
+        clock(f"LOBPCG {it}")
         logger.debug("LOBPCG %d: residuals of the wanted modes max %.1e, median %.1e",
                      it, res[:n].max(), np.median(res[:n]))
         best.append(min(res[:n].max(), best[-1]) if best else res[:n].max())

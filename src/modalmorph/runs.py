@@ -1,0 +1,274 @@
+"""What one run of the command line does: read the inputs, compute, write one output folder.
+
+:func:`morph_files` (``modalmorph morph``) and :func:`track_files` (``modalmorph track``)
+are shared by the command line, the batch workers (:mod:`modalmorph.batch`) and the web
+app (:mod:`modalmorph.app`). Their options are :class:`Settings`: one option object per
+stage (:mod:`modalmorph.options`), so that the flags, the config file, the form and the
+record in ``result.json`` are generated from all of them alike (flat names:
+:func:`modalmorph.options.flat_fields`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import glob
+import hashlib
+import os
+from dataclasses import MISSING, dataclass, field, fields
+from pathlib import Path
+
+from threadpoolctl import threadpool_limits
+
+from . import plot
+from .errors import OptionError, ShapeError
+from .io import atomic_output_dir, read_frames, read_shape, save_result, save_track
+from .matching import match
+from .material import Material
+from .options import (
+    AlignOptions,
+    MatchOptions,
+    MorphOptions,
+    OutputOptions,
+    ReadOptions,
+    TrackOptions,
+    flat_fields,
+    split,
+)
+from .pipeline import morph
+from .report import input_images, write_html
+from .track import track
+
+__all__ = ["Settings", "ItemRun", "PAIR_CLASSES",
+           "SEQUENCE_CLASSES", "BATCH_CLASSES", "FORM_CLASSES", "ONE_THREAD_NODES",
+           "blas_threads", "check_tools", "default_text", "file_record", "input_records",
+           "read_pair", "compute_morph", "morph_files", "track_files", "write_morph"]
+
+# Up to this many nodes match + morph run faster on one BLAS thread than on two (hands
+# pairs, best of 5 on a 2-core machine: 250 nodes 0.12 s with one thread, 0.23 s with
+# two; 1000 nodes 0.42 s and 0.77 s); beyond, BLAS keeps its own count.
+ONE_THREAD_NODES = 1000
+
+
+# The option classes of each command, in the order of their flags and records.
+PAIR_CLASSES = (ReadOptions, MatchOptions, AlignOptions, MorphOptions, OutputOptions)
+SEQUENCE_CLASSES = (*PAIR_CLASSES, TrackOptions)
+BATCH_CLASSES = (ReadOptions, MatchOptions, AlignOptions, MorphOptions, TrackOptions)
+FORM_CLASSES = (MatchOptions, AlignOptions, MorphOptions)
+_ATTRIBUTE = {ReadOptions: "read", MatchOptions: "match", MorphOptions: "morph",
+              AlignOptions: "align", OutputOptions: "output", TrackOptions: "sequence"}
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Every option of one run, one object per stage."""
+
+    read: ReadOptions = field(default_factory=ReadOptions)
+    match: MatchOptions = field(default_factory=MatchOptions)
+    morph: MorphOptions = field(default_factory=MorphOptions)
+    align: AlignOptions = field(default_factory=AlignOptions)
+    output: OutputOptions = field(default_factory=OutputOptions)
+    sequence: TrackOptions = field(default_factory=TrackOptions)
+
+    @classmethod
+    def from_flat(cls, values: dict, classes=SEQUENCE_CLASSES, *, where: str = "options"):
+        """Settings from flat names and values (text or TOML), as in a config file;
+        the classes not in ``classes`` keep their defaults."""
+        objects = split(values, classes, where=where)
+        return cls(**{_ATTRIBUTE[c]: obj for c, obj in objects.items()})
+
+    def flat(self, classes=SEQUENCE_CLASSES) -> dict:
+        """The options that differ from their defaults, by flat name (for
+        :meth:`from_flat`: ``Settings.from_flat({**s.flat(), **more})``)."""
+        return {name: getattr(self._of(cls), f.name)
+                for name, cls, f in flat_fields(classes)
+                if getattr(self._of(cls), f.name) != f.default}
+
+    def record(self, classes=SEQUENCE_CLASSES) -> dict:
+        """Every option by flat name, as plain JSON values (``result.json``)."""
+        records = {cls: self._of(cls).record() for cls in classes}
+        return {name: records[cls][f.name] for name, cls, f in flat_fields(classes)}
+
+    def _of(self, cls):
+        return getattr(self, _ATTRIBUTE[cls])
+
+
+@dataclass(frozen=True)
+class ItemRun:
+    """What one ``morph`` or ``track`` run computed, and the files it wrote.
+
+    Attributes
+    ----------
+    result : Morph or Track
+    files : tuple of Path
+        The files written, under the output folder.
+    """
+
+    result: object
+    files: tuple
+
+
+def default_text(f) -> str:
+    """A field's default as typed on the command line or in the form ('' for None)."""
+    value = f.default if f.default is not MISSING else f.default_factory()
+    if value is None:
+        return ""
+    if isinstance(value, Material):
+        return value.name
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return f"{value:g}"
+    if isinstance(value, tuple):
+        return " ".join(f"{x:g}" for x in value)
+    return str(value)
+
+
+def check_tools(output: OutputOptions) -> None:
+    """Refuse, before any computation, outputs whose tools are missing (ffmpeg)."""
+    if output.mp4:
+        from matplotlib import animation
+
+        if not animation.writers.is_available("ffmpeg"):
+            raise OptionError("mp4 needs ffmpeg, which is not installed (or not on PATH): "
+                              "install it, or leave out --mp4")
+
+
+def file_record(path) -> dict:
+    """``{"path", "sha256"}`` of an input file (a folder or pattern: its path only)."""
+    path = Path(path)
+    if not path.is_file():
+        return {"path": os.fspath(path.absolute()), "sha256": None}
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(2**20), b""):
+            digest.update(block)
+    return {"path": os.fspath(path.absolute()), "sha256": digest.hexdigest()}
+
+
+def input_records(inputs) -> list[dict]:
+    """:func:`file_record` of every file the inputs name: a file, each file of a folder,
+    each match of a glob pattern."""
+    records = []
+    for path in map(Path, [inputs] if isinstance(inputs, str | os.PathLike) else inputs):
+        if any(c in path.name for c in "*?["):
+            files = sorted(map(Path, glob.glob(os.fspath(path))))
+        elif path.is_dir():
+            files = sorted(p for p in path.iterdir() if p.is_file())
+        else:
+            files = [path]
+        records.extend(file_record(p) for p in files)
+    return records
+
+
+def read_pair(source_path, target_path, read: ReadOptions):
+    """The two shapes of a pair, read with the same options."""
+    kw = _read_kwargs(read)
+    source, target = read_shape(source_path, **kw), read_shape(target_path, **kw)
+    if source.dim != target.dim:
+        raise ShapeError(f"{source_path} is {source.dim}D but {target_path} is "
+                         f"{target.dim}D: both shapes must have the same dimension")
+    return source, target
+
+
+def _read_kwargs(read: ReadOptions) -> dict:
+    return dict(nodes=read.nodes, threshold=read.threshold, object=read.object)
+
+
+def compute_morph(source, target, settings: Settings, *, progress=None):
+    """:func:`modalmorph.match` then :func:`modalmorph.morph` with the settings."""
+    with blas_threads(max(source.m, target.m)):
+        matching = match(source, target, options=settings.match)
+        return morph(source, target, matching=matching,
+                     remove_rigid=settings.align.remove_rigid, options=settings.morph,
+                     progress=progress)
+
+
+def morph_files(source, target, out, settings: Settings | None = None, *,
+                progress=None) -> ItemRun:
+    """What ``modalmorph morph`` does: read two shape files, morph, write ``out``.
+
+    ``out`` is replaced all or nothing (:func:`modalmorph.io.atomic_output_dir`), and
+    missing tools are refused, before any computation. ``progress(step, distance)`` is
+    called after every time step.
+    """
+    settings = settings or Settings()
+    check_tools(settings.output)
+    out = Path(out)
+    with atomic_output_dir(out) as folder:  # checks out before any work
+        result = compute_morph(*read_pair(source, target, settings.read), settings,
+                               progress=progress)
+        inputs = input_records([source, target])
+        written = write_morph(result, folder, settings, inputs=inputs,
+                              images=(Path(source), Path(target)))
+    return ItemRun(result=result, files=tuple(out / name for name in written))
+
+
+def write_morph(result, folder: Path, settings: Settings, *, inputs=(), images=None):
+    """Write a morph's results and the outputs of ``settings.output`` into ``folder``;
+    returns the files' paths relative to it."""
+    output = settings.output
+    save_result(result, folder, params=result.params, options=settings.record(PAIR_CLASSES),
+                inputs=list(inputs))
+    if output.figures or output.gif or output.mp4:
+        look = dict(frames=output.frames, background=output.background)
+        if output.figures:
+            plot.save_figures(result, folder, formats=("png", "svg") if output.svg else
+                              ("png",), **look)
+        for wanted, name in ((output.gif, "morph.gif"), (output.mp4, "morph.mp4")):
+            if wanted:
+                plot.animate(result, folder / name, **look)
+    if output.vtk:
+        plot.write_vtk_series(result, folder / "vtk")
+    if output.html:
+        title = None if images is None else f"{images[0].name} → {images[1].name}"
+        write_html(result, folder / "report.html", title=title,
+                   images=input_images(*images) if images else None)
+    return sorted(p.relative_to(folder) for p in folder.rglob("*") if p.is_file())
+
+
+def track_files(inputs, out, settings: Settings | None = None, *, progress=None) -> ItemRun:
+    """What ``modalmorph track`` does: read the frames, track, write ``out``.
+
+    ``inputs`` is anything :func:`modalmorph.io.read_frames` reads. ``out`` is replaced
+    all or nothing. ``progress(frame, None)`` is called after every frame.
+    """
+    settings = settings or Settings()
+    output, seq = settings.output, settings.sequence
+    if output.vtk or output.html:
+        raise OptionError("track writes no VTK or HTML report: leave out --vtk and --html")
+    check_tools(output)
+    out = Path(out)
+    with atomic_output_dir(out) as tmp:
+        frames = read_frames(inputs, **_read_kwargs(settings.read))
+        morph_kw = {**{f.name: getattr(settings.morph, f.name) for f in fields(MorphOptions)},
+                    "remove_rigid": settings.align.remove_rigid}
+        with blas_threads(max(shape.m for shape in frames.shapes)):
+            result = track(frames.shapes, names=frames.names, **seq.record(),
+                           match_options=settings.match.record()
+                           if seq.correspondence == "modal" else None,
+                           morph_options=morph_kw, progress=progress)
+        save_track(result, tmp, options=settings.record(SEQUENCE_CLASSES),
+                   input_files=input_records(inputs))
+        _write_track_renderings(result, tmp, output)
+        names = sorted(p.relative_to(tmp) for p in tmp.rglob("*") if p.is_file())
+    return ItemRun(result=result, files=tuple(out / name for name in names))
+
+
+def _write_track_renderings(result, folder: Path, output: OutputOptions) -> None:
+    if not (output.figures or output.gif or output.mp4):
+        return
+    if output.figures:
+        plot.save_track_figures(result, folder)
+    for wanted, name in ((output.gif, "track.gif"), (output.mp4, "track.mp4")):
+        if wanted:
+            plot.animate_track(result, folder / name)
+
+
+@contextlib.contextmanager
+def blas_threads(nodes: int):
+    """Limit BLAS to one thread for shapes of up to :data:`ONE_THREAD_NODES` nodes."""
+    if nodes > ONE_THREAD_NODES:
+        yield
+        return
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield

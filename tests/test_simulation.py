@@ -1,0 +1,67 @@
+"""Simulation: the time loop's stages on their own (build, step, stop test, result)."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from modalmorph import MorphOptions, Shape, Simulation, morph
+
+
+def _ellipses(m=40):
+    """A circle and an ellipse of m nodes, node i paired with node i."""
+    t = np.linspace(0, 2 * np.pi, m, endpoint=False)
+    a = np.c_[np.cos(t), np.sin(t)]
+    return Shape(a), Shape(a * [1.6, 0.7] + [0.3, -0.2]), np.c_[np.arange(m), np.arange(m)]
+
+
+def test_stages_one_at_a_time():
+    a, b, pairs = _ellipses()
+    # only max_steps can stop it: no tolerance reached, equilibrium disabled
+    sim = Simulation(a, b, pairs, MorphOptions(tol=1e-12, equilibrium_tol=0, max_steps=2))
+    assert sim.steps == 0 and sim.reason is None
+    # step 0 is the source (through the model's normalised frame and back: round-off)
+    assert_allclose(sim.shapes[0], a.points, atol=1e-12)
+    with pytest.raises(RuntimeError, match="has not stopped"):
+        sim.result()
+    sim.step()
+    assert sim.steps == 1 and sim.shapes.shape == (2, 40, 2)
+    assert sim.mean_distance[1] < sim.mean_distance[0]  # the springs pull towards b
+    assert sim.stop_test() is None
+    sim.step()
+    assert sim.mean_distance[2] < sim.mean_distance[1]
+    assert sim.stop_test() == "max_steps" and sim.reason == "max_steps"
+    result = sim.result()
+    assert result.steps == 2 and not result.converged
+    assert result.stop_reason.startswith("stopped at max_steps=2")
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        result.converged = True
+
+
+def test_stop_test_tolerance():
+    a, b, pairs = _ellipses()
+    sim = Simulation(a, b, pairs, MorphOptions(tol=0.05, equilibrium_tol=0))
+    while sim.stop_test() is None:
+        sim.step()
+    assert sim.reason == "tolerance"
+    result = sim.result()
+    assert result.converged and result.distance <= 0.05 * b.size
+
+
+def test_run_is_morph():
+    """morph() is matching, alignment and the Simulation: the same numbers, bitwise."""
+    a, b, pairs = _ellipses()
+    options = MorphOptions(k=50, damping=(0.1, 0.5))
+    steps = []
+    sim = Simulation(a, b, pairs, options).run(progress=lambda s, d: steps.append(s))
+    direct = morph(a, b, matching=pairs, options=options)
+    assert steps == list(range(1, direct.steps + 1))
+    for name in ("shapes", "loads", "energy", "node_energy", "mean_distance"):
+        assert_array_equal(getattr(sim.result(), name), getattr(direct, name))
+
+
+def test_bad_pairs_refused():
+    a, b, _ = _ellipses()
+    with pytest.raises(ValueError, match="no node is matched"):
+        Simulation(a, b, np.zeros((0, 2), int))
