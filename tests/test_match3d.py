@@ -7,6 +7,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 import modalmorph as mm
+from modalmorph.match3d import refine
 
 
 def blob(m, rng):
@@ -59,3 +60,16 @@ def test_morph_with_own_pairs_reaches_target():
     # the end shape within 1 % of the size both ways (mean nearest distance)
     assert cKDTree(tgt).query(end)[0].mean() <= 0.01 * size
     assert cKDTree(end).query(tgt)[0].mean() <= 0.01 * size
+
+
+def test_refine_keeps_the_true_correspondence():
+    """Started where every source node truly belongs, the refinement stays there (its
+    coarse levels summarise both objects by cube densities, not random subsets)."""
+    src, tgt, truth = case(20000, 90, noise=0.01)
+    s, t = mm.Shape(src), mm.Shape(tgt)
+    y = t.normalized
+    z = refine(s.normalized, t.to_normalized(truth), y, 250)
+    h = cKDTree(y).query(y, k=2)[0][:, 1].mean()
+    drift = np.linalg.norm(z - t.to_normalized(truth), axis=1) / h
+    assert np.median(drift) <= 0.3  # measured 0.10 (random subsets: 0.14 here, 1.25 on the
+    # benchmark's 100 000-point blob)
