@@ -132,6 +132,16 @@ _COHERENT_ROUNDS = 50  # EM rounds (25: common-heart 0.990 / 0.879 vs 0.996 / 0.
 _COHERENT_FLOOR = 1.0
 # Nystrom landmarks of the kernel: the table to 3 decimals as with the full kernel.
 _COHERENT_LANDMARKS = 64
+# No node moves further than this x the target's node spacing from the alternation's
+# placement: a smooth field cannot turn a corner, and unclamped it dragged the stem of F
+# (DejaVu Sans -> Serif, 400 nodes, benchmarks/realdata.py) across the serif into a fold.
+# 3: F folds no more, combined 0.893 (unclamped 0.928, main 0.762), hands 0.807 (0.835);
+# 2 (F unfolded too): combined 0.887, hands 0.819 (seed 2005, 3 pairs a family).
+_COHERENT_REACH = 3.0
+# Fewer source or target nodes than this: no pass. The accuracy families have 100-400
+# nodes; below, glyphs-raw Q (29 nodes, uneven spacing) folded with the pass, and the
+# 70-node hand match took 17 ms instead of 12.
+_COHERENT_NODES = 100
 _EIG_FLOOR = 1e-10  # kernel eigenvalues below this x the largest are rounding
 
 _STIFF = 1e-3
@@ -867,18 +877,23 @@ def _final_pairs(final: _Costs, z: np.ndarray, found: tuple, reject: float):
 
 
 def _settle(fit: _Fit, final: _Costs, placed: _Placement, ordered: bool):
-    """Where the source ends (m, d) and the final search there: for contours the coherent
-    pass (:func:`_coherent`) unless the search's objective is higher there than at the
-    alternation's placement (a smooth field that fits the pair worse: serifs, fingers
-    spread differently). Measured (objective there / at the alternation's, seeds 2005 and
-    11, 4 pairs a family): pairs the pass made better 0.36-1.45, worse 1.69-5.29; with
-    a limit of 1.5 instead of 1, 7 glyph pairs of benchmarks/realdata.py (1.19-1.34) end
-    further than 1 % from the target."""
+    """Where the source ends (m, d) and the final search there: for contours of at least
+    ``_COHERENT_NODES`` nodes the coherent pass (:func:`_coherent`), each node's move from
+    the alternation's placement cut to ``_COHERENT_REACH`` target spacings, unless the
+    search's objective is higher there than at the alternation's placement (a smooth
+    field that fits the pair worse: serifs, fingers spread differently). Measured
+    (objective there / at the alternation's, seeds 2005 and 11, 4 pairs a family): pairs
+    the pass made better 0.36-1.45, worse 1.69-5.29; with a limit of 1.5 instead of 1, 7
+    glyph pairs of benchmarks/realdata.py (1.19-1.34) end further than 1 % from the
+    target."""
     everyone = np.arange(len(placed.z))
     found = _search(final, placed.z, everyone)
-    if not ordered:
+    if not ordered or min(len(final.x), len(final.y)) < _COHERENT_NODES:
         return placed.z, found
-    z = _coherent(fit, placed)
+    step = _coherent(fit, placed) - placed.z
+    reach = _COHERENT_REACH * np.sqrt(final.h2)
+    length = np.linalg.norm(step, axis=1, keepdims=True)
+    z = placed.z + step * np.minimum(1.0, reach / np.maximum(length, np.finfo(float).tiny))
     there = _search(final, z, everyone)
     if _total(there, len(z)) <= _total(found, len(z)):
         return z, there
