@@ -800,18 +800,20 @@ def _keep_or_turn(fit: _Fit, final: _Costs, placed: _Placement, turned: Similari
     return free if gain else placed
 
 
-def _band(fit: _Fit, z: np.ndarray) -> np.ndarray:
-    """Target nodes (k, 2 _COHERENT_BAND + 1) within ``_COHERENT_BAND`` of the
-    order-preserving partner of each source node of ``fit.sub`` placed at ``z``; -1 for
-    the unmatched nodes and past the ends of an open target."""
-    pairs, _ = _search(fit.costs, z, fit.sub)
+def _band(fit: _Fit, pairs: np.ndarray) -> np.ndarray:
+    """Target nodes (k, 2 _COHERENT_BAND + 1) within ``_COHERENT_BAND`` of the partner of
+    each source node of ``fit.sub`` in ``pairs`` (source index, target index); -1 for the
+    unmatched nodes and past the ends of an open target."""
     n = len(fit.costs.y)
+    partner = np.full(len(fit.costs.x), -1)
+    partner[pairs[:, 0]] = pairs[:, 1]
+    rows = np.flatnonzero(partner[fit.sub] >= 0)
     band = np.full((len(fit.sub), 2 * _COHERENT_BAND + 1), -1)
-    near = pairs[:, 1:] + np.arange(-_COHERENT_BAND, _COHERENT_BAND + 1)
+    near = partner[fit.sub[rows], None] + np.arange(-_COHERENT_BAND, _COHERENT_BAND + 1)
     if fit.costs.closed:
-        band[pairs[:, 0]] = near % n
+        band[rows] = near % n
     else:
-        band[pairs[:, 0]] = np.where((near >= 0) & (near < n), near, -1)
+        band[rows] = np.where((near >= 0) & (near < n), near, -1)
     return band
 
 
@@ -827,16 +829,17 @@ def _features(z0: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
     return kernel(z0, z0[landmarks]) @ (V[:, keep] / np.sqrt(s[keep]))
 
 
-def _coherent(fit: _Fit, placed: _Placement) -> np.ndarray:
+def _coherent(fit: _Fit, placed: _Placement, pairs: np.ndarray) -> np.ndarray:
     """Coherent point drift (Myronenko & Song 2010) restricted to the band of each node's
-    partner: the source nodes ``fit.sub`` at their similarity ``placed.sim`` move by a
-    smooth field (Gaussian kernel, ``_COHERENT_WIDTH``, weight ``_COHERENT_LAMBDA``) towards
-    a soft assignment in which every target node shares one unit of weight among the
-    source nodes whose band holds it (method.md §2). Returns where the similarity and the
-    field take every source node, (m, d)."""
+    partner in ``pairs`` (the final search at ``placed.z``): the source nodes ``fit.sub``
+    at their similarity ``placed.sim`` move by a smooth field (Gaussian kernel,
+    ``_COHERENT_WIDTH``, weight ``_COHERENT_LAMBDA``) towards a soft assignment in which
+    every target node shares one unit of weight among the source nodes whose band holds
+    it (method.md §2). Returns where the similarity and the field take every source node,
+    (m, d)."""
     x, y, sub = fit.costs.x, fit.costs.y, fit.sub
     z0 = placed.sim.apply(x)
-    band = _band(fit, placed.z)
+    band = _band(fit, pairs)
     valid = band >= 0
     landmarks = sub[np.linspace(0, len(sub), min(len(sub), _COHERENT_LANDMARKS),
                                 endpoint=False).astype(np.intp)]
@@ -890,7 +893,7 @@ def _settle(fit: _Fit, final: _Costs, placed: _Placement, ordered: bool):
     found = _search(final, placed.z, everyone)
     if not ordered or min(len(final.x), len(final.y)) < _COHERENT_NODES:
         return placed.z, found
-    step = _coherent(fit, placed) - placed.z
+    step = _coherent(fit, placed, found[0]) - placed.z
     reach = _COHERENT_REACH * np.sqrt(final.h2)
     length = np.linalg.norm(step, axis=1, keepdims=True)
     z = placed.z + step * np.minimum(1.0, reach / np.maximum(length, np.finfo(float).tiny))
