@@ -34,7 +34,8 @@ __all__ = ["Simulation", "Morph", "check_pairs", "SPARSE_MODES"]
 log = logging.getLogger(__name__)
 
 # Modes superposed by default for large objects (sparse solver), where all modes would
-# need a dense eigenproblem: the lowest ones carry the smooth part of the deformation.
+# need a dense eigenproblem: the lowest ones, with the affine motions added (method.md §7),
+# carry the smooth part of the deformation.
 SPARSE_MODES = 100
 # Equilibrium also when the mean distance gained less than _STALL_GAIN (0.1 %) over
 # _STALL steps.
@@ -50,7 +51,7 @@ _RANK_TOL = 1e-10
 # Point sets: each point's distance to a cloud's surface is taken to the plane of its
 # _PLANE nearest points (blob of 600-20 000 points, noise 0 and 1 %: the target's own
 # roughness, its points to the planes of their neighbours, is above what its true shape
-# leaves both ways, 0.05-1.8 % of the size, against 1.3-7.6 % for the distance to the
+# leaves both ways, 0.05-1.8 % of the size, against 1.3-7.9 % for the distance to the
 # nearest point). The surfaces are measured once the pulled pairs are within the
 # tolerance plus _LAZY_SPACINGS target spacings (matcher pairs err by about one spacing).
 _PLANE = 8
@@ -87,7 +88,15 @@ class Morph:
         polyline, and of the target's nodes to the shape's polyline less what a shape of
         the source's node count leaves there (the target resampled evenly by arc length
         at ``m`` nodes: a source no finer than the target cannot follow its every
-        corner). For point sets: the mean distance of the nodes pulled to partners.
+        corner). For 3D point sets (unordered): the larger of the mean distances both ways
+        between the shape's nodes and the target's surface, less the target's own
+        roughness (each point's distance to the plane of its 8 nearest points of the
+        other set, and of the target's points to the plane of their 8 nearest other
+        target points: what a sample of the target surface leaves; 0 when below), so that
+        pairs right only to about a node spacing do not keep a shape lying on the target
+        from converging; measured once the pulled pairs are within the tolerance plus 4
+        target spacings. Other point sets: the mean distance of the nodes pulled to
+        partners.
     matching : Matching or ndarray
         The correspondences used.
     similarity : Similarity or None
@@ -162,7 +171,9 @@ class Simulation:
     model : FEModel
         The physical model, of ``reduced``: the source, or a coarser copy of it.
     modes : Modes
-        The ``n_modes`` modes superposed.
+        The modes superposed: all of the model's, or its lowest ``n_modes`` and the
+        Rayleigh-Ritz modes of the affine motions outside their span
+        (:meth:`FEModel.augmented`, method.md §7).
     k_ref : float
         The stiffness of one node, the unit of ``k`` and of the energies.
     """
