@@ -566,10 +566,14 @@ def _similarity_fields(points: np.ndarray) -> np.ndarray:
 def _smooth_fields(model: FEModel, n: int) -> np.ndarray:
     """Smooth displacements of the model's nodes (d*m, s) that its lowest ``n`` modes
     carry poorly (method.md §7): the affine motions (every finite similarity
-    ``(s R - I) X + t`` lies in their span) and every mode of a copy of the model on
-    ``min(n, _COARSE_MAX)`` nodes, evaluated through its field (1)-(4)."""
+    ``(s R - I) X + t`` lies in their span) and, for a truncated model (sparse or
+    multilevel solver: a count asked of the dense solver is a choice of a coarser
+    description), every mode of a copy of it on ``min(n, _COARSE_MAX)`` nodes,
+    evaluated through its field (1)-(4)."""
     X, d = model.points, model.dim
     affine = [np.kron(np.eye(d)[a], c) for a in range(d) for c in (np.ones(len(X)), *X.T)]
+    if not model.truncated:
+        return np.column_stack(affine)
     coarse = model.coarsened(min(n, _COARSE_MAX))
     at_nodes = coarse.shape.to_normalized(model.shape.points)
     return np.column_stack([*affine, coarse.modes_at(coarse.modes(), at_nodes)])
