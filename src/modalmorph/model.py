@@ -429,8 +429,8 @@ class FEModel:
     def augmented(self, modes: Modes, fields: np.ndarray) -> Modes:
         """Rayleigh-Ritz modes on the span of ``modes`` and extra displacement fields.
 
-        ``fields`` (d*m, s) at the model's nodes (e.g. the similarity motions, which a
-        truncated basis carries poorly in 3D: method.md §7) are made M-orthogonal to the
+        ``fields`` (d*m, s) at the model's nodes (e.g. smooth motions, which a basis of
+        the lowest modes carries poorly: method.md §7) are made M-orthogonal to the
         modes (twice, classical Gram-Schmidt), M-orthonormalised (parts of relative
         M-norm below ``_RITZ_TOL`` dropped as already spanned), and the stiffness
         ``Q^T K Q`` of the remainder ``Q`` is diagonalised. With ``K Phi = M Phi Omega^2``

@@ -34,7 +34,7 @@ __all__ = ["Simulation", "Morph", "check_pairs", "SPARSE_MODES"]
 log = logging.getLogger(__name__)
 
 # Modes superposed by default for large objects (sparse solver), where all modes would
-# need a dense eigenproblem: the lowest ones, with the affine motions added (method.md §7),
+# need a dense eigenproblem: the lowest ones, with smooth motions added (method.md §7),
 # carry the smooth part of the deformation.
 SPARSE_MODES = 100
 # A truncated basis of n modes is augmented with every mode of a copy of min(n,
@@ -102,8 +102,8 @@ class Morph:
         target points: what a sample of the target surface leaves; 0 when below), so that
         pairs right only to about a node spacing do not keep a shape lying on the target
         from converging; measured once the pulled pairs are within the tolerance plus 4
-        target spacings. Other point sets: the mean distance of the nodes pulled to
-        partners.
+        target spacings. Other point sets (2D, or of at most 8 points): the mean distance
+        of the nodes pulled to partners.
     matching : Matching or ndarray
         The correspondences used.
     similarity : Similarity or None
@@ -179,8 +179,9 @@ class Simulation:
         The physical model, of ``reduced``: the source, or a coarser copy of it.
     modes : Modes
         The modes superposed: all of the model's, or its lowest ``n_modes`` and the
-        Rayleigh-Ritz modes of the affine motions outside their span
-        (:meth:`FEModel.augmented`, method.md §7).
+        Rayleigh-Ritz modes of smooth motions outside their span (the affine motions
+        and, for truncated models, a coarse copy's modes: :meth:`FEModel.augmented`,
+        method.md §7).
     k_ref : float
         The stiffness of one node, the unit of ``k`` and of the energies.
     """
@@ -280,7 +281,7 @@ class Simulation:
             self._floor = float(Polyline(resample(Y, work.m, closed=tgt.closed), tgt.closed)
                                 .distance(Y).mean())
             self._to_target = Polyline(Y, tgt.closed)
-        self._surface = not self._two_way and work.dim == 3
+        self._surface = not self._two_way and work.dim == 3 and min(work.m, tgt.m) > _PLANE
         if self._surface:  # the target's own roughness: what a sample of it leaves
             self._tree = cKDTree(self._Y)
             self._floor = float(_to_surface(self._Y, self._Y, self._tree, skip=1).mean())
@@ -424,8 +425,9 @@ class Simulation:
         return self._k_abs * self._Phi.tdot(u)
 
     def _distance(self, near: float, lazy: bool = True) -> float:
-        """The stop test's measure (normalised units). It is at least ``near``, so with
-        ``lazy`` the curves are measured only once ``near`` is within the tolerance."""
+        """The stop test's measure (normalised units, :attr:`Morph.distance`). With
+        ``lazy``, a contour's curves are measured only once ``near`` (a lower bound) is
+        within the tolerance, a point set's surfaces once it is within ``_gate``."""
         if self._surface:
             if lazy and near > self._gate:
                 return near
