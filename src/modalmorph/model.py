@@ -43,6 +43,9 @@ DENSE_MAX_DOF = 12000
 # modes_at evaluates the field densely (one (p, m) array, 8 MB) up to this many entries:
 # at 70 x 70 that takes 0.1 ms against 0.6 ms through k-d trees.
 _DENSE_FIELD_MAX = 10**6
+# augmented: a field's part outside the modes' span with an M-norm^2 below this fraction
+# of the largest field's is dropped as spanned (round-off of the orthogonalisation).
+_RITZ_TOL = 1e-10
 
 
 class FEModel:
@@ -422,6 +425,36 @@ class FEModel:
         if n not in self._modes:
             self._modes[n] = self._solver.solve(self, n)
         return self._modes[n]
+
+    def augmented(self, modes: Modes, fields: np.ndarray) -> Modes:
+        """Rayleigh-Ritz modes on the span of ``modes`` and extra displacement fields.
+
+        ``fields`` (d*m, s) at the model's nodes (e.g. smooth motions, which a basis of
+        the lowest modes carries poorly: method.md §7) are made M-orthogonal to the
+        modes (twice, classical Gram-Schmidt), M-orthonormalised (parts of relative
+        M-norm below ``_RITZ_TOL`` dropped as already spanned), and the stiffness
+        ``Q^T K Q`` of the remainder ``Q`` is diagonalised. With ``K Phi = M Phi Omega^2``
+        the coupling ``Phi^T K Q`` vanishes, so the Ritz modes are the given modes and
+        ``Q`` rotated, all ``M``-orthonormal, frequencies ascending (6), (13).
+        """
+        fields = np.asarray(fields, dtype=np.float64)
+        Phi, MPhi = modes.shapes, self.mass_times_modes(modes)
+        Q = fields
+        for _ in range(2):
+            Q = Q - Phi @ (MPhi.T @ Q)
+        gram = Q.T @ self.apply_mass(Q)
+        lam, U = np.linalg.eigh((gram + gram.T) / 2)
+        scale = np.einsum("ij,ij->j", fields, self.apply_mass(fields)).max()
+        keep = lam > _RITZ_TOL * scale
+        Q = Q @ (U[:, keep] / np.sqrt(lam[keep]))
+        KQ = Q.T @ self.apply_stiffness(Q)
+        w2, C = np.linalg.eigh((KQ + KQ.T) / 2)
+        Q = Q @ C
+        w = np.r_[modes.frequencies, np.sqrt(np.clip(w2, 0.0, None))]
+        order = np.argsort(w, kind="stable")
+        return Modes(frequencies=w[order], shapes=np.c_[Phi, Q][:, order],
+                     gaussian=np.c_[modes.gaussian, self.solve_gram(Q)][:, order],
+                     dim=self.dim)
 
     def coarsened(self, nodes: int) -> FEModel:
         """The same model (sigma, material, plane, cutoff; solver ``"auto"``) of at most
