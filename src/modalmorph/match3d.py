@@ -133,7 +133,7 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndarra
     """
     m, n = len(x), len(y)
     spacing = cKDTree(y).query(y, k=2)[0][:, 1].mean()
-    width = spacing * np.sqrt(n / start)
+    width = spacing * np.sqrt(n / max(start, 1))  # a source of under 4 nodes: start 0
     while True:
         width = max(width / _STEP, spacing)
         if width == spacing:
