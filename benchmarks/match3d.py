@@ -151,7 +151,7 @@ def main(argv=None) -> int:
     p.add_argument("--angles", default="0,30,90,180")
     p.add_argument("--methods", default="modalmorph,cpd")
     p.add_argument("--noise", type=float, default=0.01, help="fraction of the size")
-    p.add_argument("--cpd-up-to", type=int, default=10000)
+    p.add_argument("--cpd-up-to", type=int, default=2000)
     p.add_argument("--timeout", type=float, default=600.0)
     args = p.parse_args(argv)
     if args.child:

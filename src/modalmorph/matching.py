@@ -56,6 +56,11 @@ MAX_MODEL_NODES = 160
 # Objects with more nodes are matched on COARSE nodes, then refined (linear memory).
 LARGE = 2000
 COARSE = 1000
+# Unordered 3D point sets with more nodes are matched on COARSE_CLOUD nodes, then refined.
+# Measured on benchmarks/match3d.py, 100 000 points turned 90 degrees (median pair error in
+# target spacings, time on the loaded 2-core machine): blob 1000 1.49 (18 s), 2000 1.24,
+# 3000 1.14 (28 s), 4000 1.11 (44 s), 5000 2.80 (43 s); bunny 1000 1.59, 3000 1.16.
+COARSE_CLOUD = 3000
 # The matcher's alternation of search and fits runs on at most this many source nodes.
 ALTERNATION_NODES = 400
 # Largest m x n affinity matrix the paper's local/global searches may build.
@@ -924,11 +929,11 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
     return pairs, cost, align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]]), landed
 
 
-def _match_large(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
-                 ) -> tuple[np.ndarray, np.ndarray, Similarity, np.ndarray]:
+def _match_large(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions,
+                 coarse: int = COARSE) -> tuple[np.ndarray, np.ndarray, Similarity, np.ndarray]:
     """The default matcher for large objects, in memory linear in the node counts.
 
-    Both objects are matched on ``COARSE`` nodes spread evenly over them; every source
+    Both objects are matched on ``coarse`` nodes spread evenly over them; every source
     node is then carried by the fitted similarity and deformation of its nearest coarse
     nodes (inverse-distance weights) and paired with the target node nearest to where it
     lands (k-d trees); pairs farther than ``sqrt(reject)`` coarse target spacings are
@@ -937,7 +942,7 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
     along a contour, not one node of the dense sampling. Also returns where every source
     node lands (the target's user coordinates), shape (m, d).
     """
-    ci, cj = spread_indices(src, COARSE), spread_indices(tgt, COARSE)
+    ci, cj = spread_indices(src, coarse), spread_indices(tgt, coarse)
     sub_s = Shape(src.points[ci], closed=src.closed, ordered=src.ordered)
     sub_t = Shape(tgt.points[cj], closed=tgt.closed, ordered=tgt.ordered)
     *_, landed_c = _match_auto(sub_s, sub_t, n_modes, opts)
@@ -956,14 +961,19 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
 
 def _match_cloud(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
                  ) -> tuple[np.ndarray, np.ndarray, Similarity]:
-    """The default matcher for unordered 3D point sets: the modal matcher (on ``COARSE``
-    nodes for large objects), then :func:`modalmorph.match3d.refine`, then each source
-    node paired with the target node nearest to where it lands; pairs farther than
-    ``sqrt(reject)`` target spacings are dropped. Cost in squared target spacings."""
-    large = max(src.m, tgt.m) > LARGE
-    *_, landed = (_match_large if large else _match_auto)(src, tgt, n_modes, opts)
+    """The default matcher for unordered 3D point sets: the modal matcher (on
+    ``COARSE_CLOUD`` nodes for larger objects), then :func:`modalmorph.match3d.refine`,
+    then each source node paired with the target node nearest to where it lands; pairs
+    farther than ``sqrt(reject)`` target spacings are dropped. Cost in squared target
+    spacings."""
+    large = max(src.m, tgt.m) > COARSE_CLOUD
+    if large:
+        *_, landed = _match_large(src, tgt, n_modes, opts, COARSE_CLOUD)
+    else:
+        *_, landed = _match_auto(src, tgt, n_modes, opts)
+    start = min(src.m, COARSE_CLOUD if large else COARSE) // 4
     y = tgt.normalized
-    z = refine(src.normalized, tgt.to_normalized(landed), y, min(src.m, COARSE) // 4)
+    z = refine(src.normalized, tgt.to_normalized(landed), y, start)
     gap, j = cKDTree(y).query(z)
     cost = (gap / tgt.spacing) ** 2
     keep = cost <= (_REJECT if opts.reject is None else opts.reject)
