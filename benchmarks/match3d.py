@@ -22,7 +22,8 @@ pair is within 1 and 3 spacings; unpaired points count as wrong), time and peak
 memory (each case in its own process: peak resident set size of the child, MB).
 
 Run ``python benchmarks/match3d.py`` for the whole table (CPD only up to ``--cpd-up-to``
-points, each case limited by ``--timeout`` seconds), or
+points, 2000 by default: pycpd took over 600 s at 10 000; each case limited by
+``--timeout`` seconds), or
 ``--sizes 2000 --angles 0,180 --shapes bunny`` for part of it.
 """
 
