@@ -56,10 +56,17 @@ MAX_MODEL_NODES = 160
 # Objects with more nodes are matched on COARSE nodes, then refined (linear memory).
 LARGE = 2000
 COARSE = 1000
-# Unordered 3D point sets with more nodes are matched on COARSE_CLOUD nodes, then refined.
-# Measured on benchmarks/match3d.py, 100 000 points turned 90 degrees (median pair error in
-# target spacings, time on the loaded 2-core machine): blob 1000 1.49 (18 s), 2000 1.24,
-# 3000 1.14 (28 s), 4000 1.11 (44 s), 5000 2.80 (43 s); bunny 1000 1.59, 3000 1.16.
+# Unordered 3D point sets above LARGE nodes are matched on one coarse node per
+# NODES_PER_COARSE_CLOUD of the larger object, at least COARSE and at most COARSE_CLOUD,
+# then refined. Measured on benchmarks/match3d.py after the refinement (median pair error,
+# target spacings; time on the loaded 2-core machine): 100 000 points (blob turned 90 deg /
+# bunny 180), 1000 coarse nodes 1.02 / 1.33 (17-18 s), 2000 0.92 / 1.03, 3000 0.88 / 0.95
+# (28 s), 4000 (blob, before match3d's final averaging) 1.14 -> 1.11 in 44 s, 5000 2.80;
+# 50 000 points (90 and 180 deg, both shapes), 1515 0.85-0.93 (8 s), 2500 0.80-0.85
+# (10 s), 3000 0.80-0.83 (11 s); 10 000 points, 1000 0.61-0.64 (1.5 s), 3000 0.61-0.63
+# (2.9 s). On benchmarks/scale.py's twisted ellipsoid (no noise) more coarse nodes cost:
+# 10 000 points 5.8 spacings with 1000, 6.6 with 3000; 100 000 points 17.0 and 19.8.
+NODES_PER_COARSE_CLOUD = 20
 COARSE_CLOUD = 3000
 # The matcher's alternation of search and fits runs on at most this many source nodes.
 ALTERNATION_NODES = 400
@@ -961,17 +968,19 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions,
 
 def _match_cloud(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
                  ) -> tuple[np.ndarray, np.ndarray, Similarity]:
-    """The default matcher for unordered 3D point sets: the modal matcher (on
-    ``COARSE_CLOUD`` nodes for larger objects), then :func:`modalmorph.match3d.refine`,
+    """The default matcher for unordered 3D point sets: the modal matcher (above ``LARGE``
+    nodes on one coarse node per ``NODES_PER_COARSE_CLOUD``, from ``COARSE`` to
+    ``COARSE_CLOUD``), then :func:`modalmorph.match3d.refine`,
     then each source node paired with the target node nearest to where it lands; pairs
     farther than ``sqrt(reject)`` target spacings are dropped. Cost in squared target
     spacings."""
-    large = max(src.m, tgt.m) > COARSE_CLOUD
-    if large:
-        *_, landed = _match_large(src, tgt, n_modes, opts, COARSE_CLOUD)
+    m = max(src.m, tgt.m)
+    coarse = min(max(m // NODES_PER_COARSE_CLOUD, COARSE), COARSE_CLOUD)
+    if m > LARGE:
+        *_, landed = _match_large(src, tgt, n_modes, opts, coarse)
     else:
         *_, landed = _match_auto(src, tgt, n_modes, opts)
-    start = min(src.m, COARSE_CLOUD if large else COARSE) // 4
+    start = min(src.m, coarse) // 4
     y = tgt.normalized
     z = refine(src.normalized, tgt.to_normalized(landed), y, start)
     gap, j = cKDTree(y).query(z)
