@@ -56,6 +56,18 @@ MAX_MODEL_NODES = 160
 # Objects with more nodes are matched on COARSE nodes, then refined (linear memory).
 LARGE = 2000
 COARSE = 1000
+# Unordered 3D point sets above LARGE nodes are matched on one coarse node per
+# NODES_PER_COARSE_CLOUD of the larger object, at least COARSE and at most COARSE_CLOUD,
+# then refined. Measured on benchmarks/match3d.py after the refinement (median pair error,
+# target spacings; time on the loaded 2-core machine): 100 000 points (blob turned 90 deg /
+# bunny 180), 1000 coarse nodes 1.02 / 1.33 (17-18 s), 2000 0.92 / 1.03, 3000 0.88 / 0.95
+# (28 s), 4000 (blob, before match3d's final averaging) 1.14 -> 1.11 in 44 s, 5000 2.80;
+# 50 000 points (90 and 180 deg, both shapes), 1515 0.85-0.93 (8 s), 2500 0.80-0.85
+# (10 s), 3000 0.80-0.83 (11 s); 10 000 points, 1000 0.61-0.64 (1.5 s), 3000 0.61-0.63
+# (2.9 s). On benchmarks/scale.py's twisted ellipsoid (no noise) more coarse nodes cost:
+# 10 000 points 5.8 spacings with 1000, 6.6 with 3000; 100 000 points 17.0 and 19.8.
+NODES_PER_COARSE_CLOUD = 20
+COARSE_CLOUD = 3000
 # The matcher's alternation of search and fits runs on at most this many source nodes.
 ALTERNATION_NODES = 400
 # Largest m x n affinity matrix the paper's local/global searches may build.
@@ -924,11 +936,11 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
     return pairs, cost, align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]]), landed
 
 
-def _match_large(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
-                 ) -> tuple[np.ndarray, np.ndarray, Similarity, np.ndarray]:
+def _match_large(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions,
+                 coarse: int = COARSE) -> tuple[np.ndarray, np.ndarray, Similarity, np.ndarray]:
     """The default matcher for large objects, in memory linear in the node counts.
 
-    Both objects are matched on ``COARSE`` nodes spread evenly over them; every source
+    Both objects are matched on ``coarse`` nodes spread evenly over them; every source
     node is then carried by the fitted similarity and deformation of its nearest coarse
     nodes (inverse-distance weights) and paired with the target node nearest to where it
     lands (k-d trees); pairs farther than ``sqrt(reject)`` coarse target spacings are
@@ -937,7 +949,7 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
     along a contour, not one node of the dense sampling. Also returns where every source
     node lands (the target's user coordinates), shape (m, d).
     """
-    ci, cj = spread_indices(src, COARSE), spread_indices(tgt, COARSE)
+    ci, cj = spread_indices(src, coarse), spread_indices(tgt, coarse)
     sub_s = Shape(src.points[ci], closed=src.closed, ordered=src.ordered)
     sub_t = Shape(tgt.points[cj], closed=tgt.closed, ordered=tgt.ordered)
     *_, landed_c = _match_auto(sub_s, sub_t, n_modes, opts)
@@ -956,14 +968,21 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
 
 def _match_cloud(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
                  ) -> tuple[np.ndarray, np.ndarray, Similarity]:
-    """The default matcher for unordered 3D point sets: the modal matcher (on ``COARSE``
-    nodes for large objects), then :func:`modalmorph.match3d.refine`, then each source
-    node paired with the target node nearest to where it lands; pairs farther than
-    ``sqrt(reject)`` target spacings are dropped. Cost in squared target spacings."""
-    large = max(src.m, tgt.m) > LARGE
-    *_, landed = (_match_large if large else _match_auto)(src, tgt, n_modes, opts)
+    """The default matcher for unordered 3D point sets: the modal matcher (above ``LARGE``
+    nodes on one coarse node per ``NODES_PER_COARSE_CLOUD``, from ``COARSE`` to
+    ``COARSE_CLOUD``), then :func:`modalmorph.match3d.refine`,
+    then each source node paired with the target node nearest to where it lands; pairs
+    farther than ``sqrt(reject)`` target spacings are dropped. Cost in squared target
+    spacings."""
+    m = max(src.m, tgt.m)
+    coarse = min(max(m // NODES_PER_COARSE_CLOUD, COARSE), COARSE_CLOUD)
+    if m > LARGE:
+        *_, landed = _match_large(src, tgt, n_modes, opts, coarse)
+    else:
+        *_, landed = _match_auto(src, tgt, n_modes, opts)
+    start = min(src.m, coarse) // 4
     y = tgt.normalized
-    z = refine(src.normalized, tgt.to_normalized(landed), y, min(src.m, COARSE) // 4)
+    z = refine(src.normalized, tgt.to_normalized(landed), y, start)
     gap, j = cKDTree(y).query(z)
     cost = (gap / tgt.spacing) ** 2
     keep = cost <= (_REJECT if opts.reject is None else opts.reject)
