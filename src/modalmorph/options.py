@@ -135,8 +135,8 @@ class MatchOptions(_Options):
 class MorphOptions(_Options):
     """The physical model, the loads, the time integration and the stop test of
     :func:`modalmorph.morph`; each field's ``help`` says what it does, and the docstring
-    of :func:`modalmorph.morph` why the defaults are what they are (with the
-    measurements)."""
+    of :mod:`modalmorph.pipeline` (and docs/method.md §4, §5) why the defaults are what
+    they are, with the measurements."""
 
     # physics
     material: Material = _opt(
