@@ -406,3 +406,11 @@ def test_track_report_plays_the_frames(browser, hearts, tmp_path):
         ".split(' ').map(p => p.split(',').map(Number))"))
     assert_allclose(drawn_target[:-1], result.frames[-1].points, atol=COORD_ATOL)  # frame 2
     assert "frame 2 / 2" in browser.find_element("id", "step-label").text
+
+
+def test_payload_says_which_way_y_points(heart_result):
+    """Shapes from images are drawn y down by the viewer; bare coordinates y up."""
+    assert result_payload(heart_result)["y_up"] is False  # the bundled heart, in pixels
+    bare = morph(np.asarray(heart_result.source.points), np.asarray(heart_result.target.points),
+                 max_steps=1)
+    assert result_payload(bare)["y_up"] is True

@@ -19,9 +19,8 @@ from selenium.webdriver.support.ui import Select, WebDriverWait
 
 from modalmorph import morph
 from modalmorph.app import make_server
-from modalmorph.datasets import load_hand
+from modalmorph.datasets import hand_shape
 from modalmorph.report import write_html
-from modalmorph.shape import resample
 
 OUT = Path(__file__).parent
 
@@ -72,8 +71,9 @@ b.find_element(By.ID, "show-matches").click()
 Select(b.find_element(By.ID, "color-by")).select_by_value("load")
 b.find_element(By.ID, "scale-step").click()
 box = b.find_element(By.ID, "view").rect
-hover = b.execute_script("const p = V.data.shapes[V.step][40], m = document.querySelector('#view')"
-                         ".getScreenCTM(); return [p[0] * m.a + m.e, p[1] * m.d + m.f]")
+hover = b.execute_script("const p = V.data.shapes[V.step][40], "
+                         "m = document.querySelector('#view .scene').getScreenCTM(); "
+                         "return [p[0] * m.a + m.e, p[1] * m.d + m.f]")
 ActionChains(b).move_to_element_with_offset(b.find_element(By.ID, "view"),
                                             hover[0] - box["x"] - box["width"] / 2,
                                             hover[1] - box["y"] - box["height"] / 2).perform()
@@ -93,7 +93,7 @@ with tempfile.TemporaryDirectory() as tmp:  # a grey image: threshold, then the 
     wait.until(lambda b: b.find_elements(By.CSS_SELECTOR, "#view .bg image"))
     shot("08-image-with-threshold")
 
-    hands = morph(resample(load_hand(0), 120), resample(load_hand(3), 140))
+    hands = morph(hand_shape(0, 120), hand_shape(3, 140))
     report = write_html(hands, Path(tmp) / "report.html", title="hands: hand 0 -> hand 3")
     b.get(report.as_uri())
     ready("result")

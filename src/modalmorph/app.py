@@ -353,7 +353,8 @@ class _Handler(BaseHTTPRequestHandler):
         self.server.keep(self.server.shapes, sid, dict(shape=shape, name=name, image=image))
         pts = np.asarray(shape.points)
         return {"id": sid, "name": name, "points": pts.tolist(), "dim": int(pts.shape[1]),
-                "closed": bool(shape.closed), "image": image}
+                "closed": bool(shape.closed), "image": image,
+                "y_up": shape.frame is None or not shape.frame.y_down}
 
     def _post_run(self, rest, query):
         body = self._read_json()

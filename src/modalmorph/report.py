@@ -102,7 +102,8 @@ def result_payload(result, *, title: str | None = None, images: dict | None = No
         (T+1, m, d), ``node_energy`` (T+1, m), ``energy`` (T+1,), ``mean_distance``
         (T+1,), ``source`` and ``target`` points with ``source_closed`` and
         ``target_closed``, ``pairs`` (K, 2), ``parameters``, ``converged``,
-        ``stop_reason`` and ``modalmorph_version``; for a morph also ``loads``
+        ``stop_reason``, ``modalmorph_version`` and ``y_up`` (coordinates not from an
+        image or SVG: drawn with y up); for a morph also ``loads``
         (T+1, m, d); for a track ``frames`` (the observed object of every frame).
         Non-finite numbers are None.
     """
@@ -136,7 +137,9 @@ def result_payload(result, *, title: str | None = None, images: dict | None = No
             mean_distance=_array(result.mean_distance), loads=_array(result.loads),
             pairs=np.asarray(result.matching.pairs, dtype=int).reshape(-1, 2).tolist(),
             converged=bool(result.converged), stop_reason=str(result.stop_reason))
-    payload.update(source=_points(first), target=_points(last),
+    frame = getattr(last, "frame", None)  # shapes from images (and SVG) are drawn y down
+    payload.update(y_up=frame is None or not frame.y_down,
+                   source=_points(first), target=_points(last),
                    source_closed=bool(getattr(first, "closed", True)),
                    target_closed=bool(getattr(last, "closed", True)))
     return payload
