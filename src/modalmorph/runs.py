@@ -14,7 +14,7 @@ import contextlib
 import glob
 import hashlib
 import os
-from dataclasses import MISSING, dataclass, field, fields
+from dataclasses import MISSING, dataclass, field
 from pathlib import Path
 
 from threadpoolctl import threadpool_limits
@@ -240,13 +240,12 @@ def track_files(inputs, out, settings: Settings | None = None, *, progress=None)
     out = Path(out)
     with atomic_output_dir(out) as tmp:
         frames = read_frames(inputs, **_read_kwargs(settings.read))
-        morph_kw = {**{f.name: getattr(settings.morph, f.name) for f in fields(MorphOptions)},
-                    "remove_rigid": settings.align.remove_rigid}
         with blas_threads(max(shape.m for shape in frames.shapes)):
-            result = track(frames.shapes, names=frames.names, **seq.record(),
-                           match_options=settings.match.record()
+            result = track(frames.shapes, names=frames.names, options=seq,
+                           match_options=settings.match
                            if seq.correspondence == "modal" else None,
-                           morph_options=morph_kw, progress=progress)
+                           morph_options=settings.morph,
+                           remove_rigid=settings.align.remove_rigid, progress=progress)
         save_track(result, tmp, options=settings.record(SEQUENCE_CLASSES),
                    input_files=input_records(inputs))
         _write_track_renderings(result, tmp, output)

@@ -116,7 +116,7 @@ class Track:
 
 def track(frames, *, options: TrackOptions | None = None,
           names: Sequence[str] | None = None, match_options: MatchOptions | dict | None = None,
-          morph_options: MorphOptions | dict | None = None,
+          morph_options: MorphOptions | dict | None = None, remove_rigid: bool = False,
           progress: Callable[[int, int], None] | None = None, **overrides) -> Track:
     """Follow the nodes of frame 0 through a sequence of observed objects.
 
@@ -136,6 +136,8 @@ def track(frames, *, options: TrackOptions | None = None,
     match_options, morph_options : MatchOptions, MorphOptions or dict, optional
         The matcher's (``correspondence="modal"`` only) and the morph's options; dicts of
         their fields are converted (``morph_options`` may also hold ``remove_rigid``).
+    remove_rigid : bool, optional
+        Remove the similarity between consecutive frames first (:func:`modalmorph.morph`).
     progress : callable, optional
         Called after each frame as ``progress(frame, n_frames)``.
     **overrides
@@ -152,7 +154,8 @@ def track(frames, *, options: TrackOptions | None = None,
     """
     opts = _track_options(options, overrides)
     match_opts = _match_options(match_options, opts.correspondence)
-    morph_opts = _morph_options(morph_options)
+    options_, dict_rigid = _morph_options(morph_options)
+    morph_opts = options_, remove_rigid or dict_rigid
     shapes, names = _frames(frames, names, opts.start_node)
     step = partial(_morph_frame, names=names, match_options=match_opts,
                    morph_options=morph_opts)
