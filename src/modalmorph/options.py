@@ -70,8 +70,9 @@ class _Options:
             choices = f.metadata.get("choices")
             if choices and value not in choices and not (
                     f.metadata["kind"] == "object" and _is_label(value)):
-                raise OptionError(f"{f.name} must be one of {', '.join(map(str, choices))}, "
-                                  f"got {value!r}")
+                label = " or a label number >= 1" if f.metadata["kind"] == "object" else ""
+                raise OptionError(f"{f.name} must be one of {', '.join(map(str, choices))}"
+                                  f"{label}, got {value!r}")
         self._check()
 
     def _check(self):
