@@ -23,7 +23,7 @@ from selenium.webdriver.chrome.service import Service
 from selenium.webdriver.support.ui import WebDriverWait
 
 from modalmorph import Morph, Shape
-from modalmorph.report import write_html
+from modalmorph.apps.report import write_html
 
 SCRUB = """
 const done = arguments[arguments.length - 1];

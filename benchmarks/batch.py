@@ -29,13 +29,13 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from modalmorph.batch import Engine, Item, run  # noqa: E402
+from modalmorph.apps.batch import Engine, Item, run  # noqa: E402
+from modalmorph.apps.runs import Settings, morph_files  # noqa: E402
+from modalmorph.core.shape import Shape  # noqa: E402
 from modalmorph.datasets import load_heart  # noqa: E402
 from modalmorph.matching import match  # noqa: E402
 from modalmorph.options import OutputOptions  # noqa: E402
 from modalmorph.pipeline import morph  # noqa: E402
-from modalmorph.runs import Settings, morph_files  # noqa: E402
-from modalmorph.shape import Shape  # noqa: E402
 
 
 def cpu_seconds():

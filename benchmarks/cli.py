@@ -23,11 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
-from modalmorph import plot
+from modalmorph import figures
+from modalmorph.apps.runs import Settings, compute_morph
+from modalmorph.core.shape import Shape, resample
 from modalmorph.datasets import load_hand
 from modalmorph.io import save_result
-from modalmorph.runs import Settings, compute_morph
-from modalmorph.shape import Shape, resample
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 
@@ -63,9 +63,9 @@ def split(source, target, folder: Path) -> dict:
     parts["compute"], start = time.perf_counter() - start, time.perf_counter()
     save_result(result, folder, params=result.params, options=settings.record())
     parts["results"], start = time.perf_counter() - start, time.perf_counter()
-    plot.save_figures(result, folder, formats=("png",))  # the command line's default
+    figures.save_figures(result, folder, formats=("png",))  # the command line's default
     parts["figures"], start = time.perf_counter() - start, time.perf_counter()
-    plot.animate(result, folder / "morph.gif")
+    figures.animate(result, folder / "morph.gif")
     parts["gif"] = time.perf_counter() - start
     parts["steps"] = result.steps
     return parts

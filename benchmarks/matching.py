@@ -52,9 +52,9 @@ from pathlib import Path
 
 import numpy as np
 
+from modalmorph.core.shape import Shape, resample
 from modalmorph.datasets import load_hand, load_heart
 from modalmorph.matching import match
-from modalmorph.shape import Shape, resample
 
 ROWS = 1590
 HANDS = [load_hand(i) for i in range(8)]

@@ -24,8 +24,8 @@ import time
 import numpy as np
 
 from modalmorph import FEModel
+from modalmorph.core.shape import resample
 from modalmorph.datasets import load_hand
-from modalmorph.shape import resample
 
 
 def hand(m: int) -> np.ndarray:

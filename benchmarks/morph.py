@@ -19,8 +19,8 @@ import numpy as np
 from scipy import linalg
 
 import modalmorph as mm
+from modalmorph.core.element import gram_entries, stiffness_entries
 from modalmorph.datasets import load_hand
-from modalmorph.element import gram_entries, stiffness_entries
 
 
 def pair(n):

@@ -96,7 +96,7 @@ class _SolverLog(logging.Handler):
 def _child(case: str, n: int) -> dict:
     points = CASES[case]()
     log = _SolverLog()
-    logger = logging.getLogger("modalmorph.solvers.multilevel")
+    logger = logging.getLogger("modalmorph.core.solvers.multilevel")
     logger.addHandler(log)
     logger.setLevel(logging.INFO)
     t0 = time.perf_counter()

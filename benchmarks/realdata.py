@@ -17,7 +17,7 @@ One row per pair, a summary per family, a pass line per family. Families:
   contracted by 5 %, rotated 3 degrees, with another start node.
 
 Columns: ``rot`` the rotation (degrees) of the similarity between matched nodes
-(:func:`modalmorph.quality.correspondence_rotation`; the true one is ~0 except
+(:func:`modalmorph.core.quality.correspondence_rotation`; the true one is ~0 except
 common-frame's hand, 3); ``matched`` pairs / m; ``steps``, ``conv`` from the morph;
 ``cross`` the number of steps after the source whose shape crosses itself, ``ends`` S / T
 when the source / target itself crosses (then crossing is not the morph's fault); ``d_fwd``
@@ -54,9 +54,9 @@ from pathlib import Path
 import numpy as np
 
 import modalmorph
-from modalmorph import quality
+from modalmorph.core import quality
+from modalmorph.core.shape import resample
 from modalmorph.datasets import load_heart
-from modalmorph.shape import resample
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 FAMILIES = ["heart", "hands", "glyphs", "glyphs-raw", "horse", "scale", "common-frame"]
@@ -186,7 +186,7 @@ def _picture(path: Path, title: str, a, b, matching, result) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from modalmorph.plot import plot_matches, plot_shapes
+    from modalmorph.figures import plot_matches, plot_shapes
 
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 6.2))
     plot_matches(a, b, matching.pairs, ax=ax1)

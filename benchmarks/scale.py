@@ -83,9 +83,9 @@ from morph import reference, reference_match  # noqa: E402
 
 import modalmorph as mm  # noqa: E402
 from modalmorph import FEModel, Shape  # noqa: E402
+from modalmorph.core.shape import coarsen  # noqa: E402
+from modalmorph.core.solvers.multilevel import COARSE_NODES  # noqa: E402
 from modalmorph.datasets import load_hand, load_hands  # noqa: E402
-from modalmorph.shape import coarsen  # noqa: E402
-from modalmorph.solvers.multilevel import COARSE_NODES  # noqa: E402
 
 CASES = {
     "2d-1k": ("hand", 1000),
@@ -200,7 +200,7 @@ class _SolverLog(logging.Handler):
 
     def __enter__(self):
         self.result = {}
-        self._logger = logging.getLogger("modalmorph.solvers.multilevel")
+        self._logger = logging.getLogger("modalmorph.core.solvers.multilevel")
         self._logger.addHandler(self)
         self._logger.setLevel(logging.INFO)
         return self

@@ -13,7 +13,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 import modalmorph as mm  # noqa: E402
-from modalmorph import plot  # noqa: E402
+from modalmorph import figures  # noqa: E402
 from modalmorph.datasets import heart_shape  # noqa: E402
 
 # contours traced on the MRI slice: pixel coordinates, drawn with y pointing down
@@ -23,11 +23,11 @@ full = mm.morph(diastole, systole, matching=matching)
 local = mm.morph(diastole, systole, matching=matching, remove_rigid=True)
 
 fig, axes = plt.subplots(1, 3, figsize=(16, 5.6), layout="constrained")
-plot.plot_shapes(full, color_by="energy", ax=axes[0])
+figures.plot_shapes(full, color_by="energy", ax=axes[0])
 axes[0].set_title(f"whole deformation: {full.steps} steps", pad=26)
-plot.plot_shapes(local, color_by="energy", ax=axes[1])
+figures.plot_shapes(local, color_by="energy", ax=axes[1])
 axes[1].set_title(f"rigid part removed (Horn): {local.steps} steps", pad=26)
-plot.plot_energy(full, ax=axes[2])
+figures.plot_energy(full, ax=axes[2])
 
 summary = (f"{len(matching.pairs)} matches of {diastole.m} and {systole.m} nodes; "
            f"energy {full.energy[-1]:.3g} (whole) vs {local.energy[-1]:.3g} (non-rigid)")

@@ -5,8 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from modalmorph.core.shape import resample
 from modalmorph.datasets import load_hand, load_heart
-from modalmorph.shape import resample
 
 DATA = Path(__file__).parent / "data"
 

@@ -444,7 +444,7 @@ def _run_cli(path: Path, good: Path, work: Path, timeout: float, env: dict):
     shutil.copy(path, src)
     shutil.copy(good, folder / "good.csv")
     try:
-        proc = subprocess.run([sys.executable, "-m", "modalmorph.cli", "morph", src.name,
+        proc = subprocess.run([sys.executable, "-m", "modalmorph.apps.cli", "morph", src.name,
                                "good.csv", "--out", "X"], cwd=folder, env=env,
                               capture_output=True, text=True, timeout=timeout)
         err = proc.stderr.strip().splitlines()

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from modalmorph.align import Similarity, align
+from modalmorph.core.align import Similarity, align
 
 from .conftest import random_rotation, sphere_points
 

@@ -20,11 +20,11 @@ import pytest
 from numpy.testing import assert_allclose
 
 from modalmorph import morph
-from modalmorph.app import MAX_UPLOAD, make_server, morph_options, parse_options
+from modalmorph.apps.app import MAX_UPLOAD, make_server, morph_options, parse_options
+from modalmorph.apps.report import result_payload, write_html
+from modalmorph.apps.runs import FORM_CLASSES
 from modalmorph.datasets import heart_shape
 from modalmorph.options import flat_fields
-from modalmorph.report import result_payload, write_html
-from modalmorph.runs import FORM_CLASSES
 
 # Coordinates travel as JSON doubles and SVG attributes (shortest round-trip text):
 # exact; the margin covers a different BLAS summation order between two runs.
@@ -376,7 +376,7 @@ def test_report_in_browser(browser, downloads, heart_result, tmp_path):
 
 
 def test_morph_html_flag_writes_the_report(tmp_path, hearts):
-    from modalmorph.cli import main
+    from modalmorph.apps.cli import main
 
     for name, points in zip(("a.csv", "b.csv"), hearts, strict=True):
         np.savetxt(tmp_path / name, points, delimiter=",", header="x,y", comments="")

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from modalmorph.batch import Engine, Item, read_manifest, run
-from modalmorph.cli import main
+from modalmorph.apps.batch import Engine, Item, read_manifest, run
+from modalmorph.apps.cli import main
 from modalmorph.datasets import load_hands, load_heart
 
 SRC = Path(__file__).resolve().parents[1] / "src"
@@ -196,7 +196,7 @@ def _toml(path, body):
 def test_figures_all_and_summary(data, tmp_path):
     """--figures all: an item's folder holds what morph writes with its figures and GIF;
     --figures summary: one figure of the batch."""
-    from modalmorph.batch import run_item, write_summary
+    from modalmorph.apps.batch import run_item, write_summary
 
     item = Item(id="hands", source=str(data / "h0.csv"), target=str(data / "h3.csv"))
     row = run_item(item, tmp_path / "out", figures="all")

@@ -8,12 +8,12 @@ import sys
 import numpy as np
 import pytest
 
-from modalmorph import cli, runs
-from modalmorph.app import morph_options
-from modalmorph.cli import build_parser, main
+from modalmorph.apps import cli, runs
+from modalmorph.apps.app import morph_options
+from modalmorph.apps.cli import build_parser, main
+from modalmorph.core.shape import resample
 from modalmorph.datasets import load_hand
 from modalmorph.options import OPTION_CLASSES, TrackOptions, flat_fields
-from modalmorph.shape import resample
 
 
 def _csv(path, points, header=True):

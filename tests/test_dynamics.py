@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from modalmorph import dynamics
+from modalmorph.core import dynamics
+from modalmorph.core.dynamics import LoadTargets, Newmark
 from modalmorph.datasets import load_hand
-from modalmorph.dynamics import LoadTargets, Newmark
 
 
 def _pair(n=120):

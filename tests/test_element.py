@@ -5,7 +5,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from modalmorph import POLYETHYLENE, FEModel, Material
-from modalmorph.element import (
+from modalmorph.core.element import (
     gram_entries,
     self_entries,
     stiffness_component_pairs,

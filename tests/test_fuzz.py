@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from modalmorph.cli import main
+from modalmorph.apps.cli import main
 from modalmorph.io import read_shape
 
 from .fuzz_corpus import CONTOUR, write_corpus, write_good_csv
@@ -29,7 +29,7 @@ LONG = os.environ.get("MODALMORPH_FUZZ") == "long"
 
 
 def _env(**extra):
-    """Environment for a child ``python -m modalmorph.cli``: this checkout's sources first
+    """Environment for a child ``python -m modalmorph.apps.cli``: this checkout's sources first
     (the package need not be installed), one BLAS thread, no display."""
     path = os.pathsep.join(p for p in (str(SRC), os.environ.get("PYTHONPATH")) if p)
     return dict(os.environ, PYTHONPATH=path, OPENBLAS_NUM_THREADS="1", MPLBACKEND="Agg",
@@ -156,7 +156,7 @@ def test_killed_runs_leave_the_output_complete_or_absent(tmp_path):
 
     def start(k, out, **env):
         return subprocess.Popen(
-            [sys.executable, "-m", "modalmorph.cli", "morph", "source.csv", "target.csv",
+            [sys.executable, "-m", "modalmorph.apps.cli", "morph", "source.csv", "target.csv",
              "--out", out, "--k", str(k), "--no-gif", "-q"],
             cwd=tmp_path, env=_env(**env), stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL)

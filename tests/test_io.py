@@ -13,6 +13,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 import modalmorph
 import modalmorph.io as io_module
+from modalmorph.core.shape import ImageFrame, Shape
 from modalmorph.io import (
     DEFAULT_NODES,
     OUTPUT_MARKER,
@@ -24,7 +25,6 @@ from modalmorph.io import (
     save_result,
     write_points,
 )
-from modalmorph.shape import ImageFrame, Shape
 
 # A small non-symmetric 2D contour (a pentagon-ish outline) and a 3D point set.
 SQUARE = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.5, 1.5], [0.0, 1.0]])

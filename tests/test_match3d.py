@@ -7,7 +7,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 import modalmorph as mm
-from modalmorph.match3d import refine
+from modalmorph.matching.clouds import refine
 
 
 def blob(m, rng):

@@ -7,6 +7,7 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from modalmorph import matching
+from modalmorph.core.shape import Shape, resample
 from modalmorph.datasets import load_hand, load_heart
 from modalmorph.errors import OptionError
 from modalmorph.matching import (
@@ -21,7 +22,6 @@ from modalmorph.matching import (
     modal_features,
 )
 from modalmorph.options import MatchOptions
-from modalmorph.shape import Shape, resample
 
 from .conftest import sphere_points
 

@@ -55,10 +55,10 @@ def test_core_imports_no_optional_library(tmp_path):
 COMMANDS = """
 import numpy as np
 from PIL import Image
-from modalmorph.cli import main
+from modalmorph.apps.cli import main
 from modalmorph.datasets import load_hand
 from modalmorph.io import read_shape
-from modalmorph.shape import resample
+from modalmorph.core.shape import resample
 
 a, b = resample(load_hand(0), 60), resample(load_hand(3), 70)
 np.savetxt("a.csv", a, delimiter=",", header="x,y", comments="")

@@ -9,9 +9,9 @@ from numpy.testing import assert_allclose
 from scipy.spatial import cKDTree
 
 from modalmorph import FEModel, morph
+from modalmorph.core.solvers import AUTO_MULTILEVEL_MIN_NODES
+from modalmorph.core.solvers.multilevel import MULTILEVEL_CUTOFF, Operators, solve
 from modalmorph.pipeline import SPARSE_MODES
-from modalmorph.solvers import AUTO_MULTILEVEL_MIN_NODES
-from modalmorph.solvers.multilevel import MULTILEVEL_CUTOFF, Operators, solve
 
 from .conftest import sphere_points
 

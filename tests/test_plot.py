@@ -13,7 +13,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.axes import Axes  # noqa: E402
 from PIL import Image  # noqa: E402
 
-from modalmorph.plot import (  # noqa: E402
+from modalmorph.figures import (  # noqa: E402
     MAX_ANIMATION_FRAMES,
     TARGET_COLOR,
     animate,

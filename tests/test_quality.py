@@ -4,15 +4,15 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from modalmorph.align import Similarity
-from modalmorph.quality import (
+from modalmorph.core.align import Similarity
+from modalmorph.core.quality import (
     area,
     correspondence_rotation,
     curve_distances,
     roughness,
     self_crossings,
 )
-from modalmorph.shape import resample
+from modalmorph.core.shape import resample
 
 from .conftest import random_rotation, self_intersections
 

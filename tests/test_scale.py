@@ -8,10 +8,10 @@ from numpy.testing import assert_allclose
 from scipy import sparse
 
 from modalmorph import FEModel
+from modalmorph.core.element import AUTO_DENSE_MAX_DOF, cutoff_radius
+from modalmorph.core.model import DENSE_MAX_DOF
+from modalmorph.core.shape import resample
 from modalmorph.datasets import load_hand
-from modalmorph.element import AUTO_DENSE_MAX_DOF, cutoff_radius
-from modalmorph.model import DENSE_MAX_DOF
-from modalmorph.shape import resample
 
 from .conftest import sphere_points
 

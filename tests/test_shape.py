@@ -8,7 +8,7 @@ from hypothesis.extra.numpy import arrays
 from numpy.testing import assert_allclose
 
 from modalmorph import Shape
-from modalmorph.shape import ImageFrame, resample
+from modalmorph.core.shape import ImageFrame, resample
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 

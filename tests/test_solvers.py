@@ -7,8 +7,8 @@ from numpy.testing import assert_allclose
 
 import modalmorph
 from modalmorph import FEModel
+from modalmorph.core.shape import resample
 from modalmorph.datasets import load_hand
-from modalmorph.shape import resample
 
 from .conftest import sphere_points
 

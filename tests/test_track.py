@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from modalmorph import Shape, track
+from modalmorph.core.shape import resample
 from modalmorph.datasets import load_heart
-from modalmorph.shape import resample
 
 FRAMES = 20
 
@@ -141,7 +141,7 @@ def write_inputs(kind, tmp_path, masks):
 
 @pytest.mark.parametrize("kind", ["png", "tiff", "npz"])
 def test_cli_track(kind, tmp_path):
-    from modalmorph.cli import main
+    from modalmorph.apps.cli import main
 
     masks = horse_masks()
     inputs = write_inputs(kind, tmp_path, masks)
@@ -172,7 +172,7 @@ def test_cli_track(kind, tmp_path):
 def test_cli_track_bad_input(bad, message, tmp_path, capsys, hearts):
     from PIL import Image
 
-    from modalmorph.cli import main
+    from modalmorph.apps.cli import main
 
     masks = horse_masks(3)
     if bad == "empty":

@@ -10,9 +10,9 @@ from numpy.testing import assert_allclose
 
 import modalmorph as mm
 from modalmorph import matching
+from modalmorph.core.quality import correspondence_rotation, curve_distances, self_crossings
+from modalmorph.core.shape import resample
 from modalmorph.datasets import load_hand, load_heart
-from modalmorph.quality import correspondence_rotation, curve_distances, self_crossings
-from modalmorph.shape import resample
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "heart"
 

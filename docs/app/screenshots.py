@@ -18,9 +18,9 @@ from selenium.webdriver.common.keys import Keys
 from selenium.webdriver.support.ui import Select, WebDriverWait
 
 from modalmorph import morph
-from modalmorph.app import make_server
+from modalmorph.apps.app import make_server
+from modalmorph.apps.report import write_html
 from modalmorph.datasets import hand_shape
-from modalmorph.report import write_html
 
 OUT = Path(__file__).parent
 

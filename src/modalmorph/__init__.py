@@ -5,17 +5,17 @@ between objects by a physical methodology", with Sclaroff's Gaussian finite elem
 modal matching, Horn alignment, Lagrange's dynamic equilibrium and strain energy.
 """
 
-from .align import Similarity, align
-from .element import DEFAULT_SIGMA
+from .core.align import Similarity, align
+from .core.element import DEFAULT_SIGMA
+from .core.material import MATERIALS, POLYETHYLENE, RUBBER, UNIT, Material
+from .core.model import FEModel
+from .core.modes import Modes, rayleigh
+from .core.shape import Shape, resample
 from .errors import MorphDivergedError
 from .io import read_shape
 from .matching import Matching, match
-from .material import MATERIALS, POLYETHYLENE, RUBBER, UNIT, Material
-from .model import FEModel
-from .modes import Modes, rayleigh
 from .options import MatchOptions, MorphOptions
 from .pipeline import Morph, morph
-from .shape import Shape, resample
 from .simulation import Simulation
 from .track import Track, TrackOptions, track
 from .version import __version__

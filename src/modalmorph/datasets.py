@@ -6,7 +6,7 @@ from importlib import resources
 
 import numpy as np
 
-from .shape import ImageFrame, Shape, resample
+from .core.shape import ImageFrame, Shape, resample
 
 __all__ = ["load_hand", "load_hands", "load_heart", "data_path", "hand_shape", "heart_shape",
            "PIXELS"]

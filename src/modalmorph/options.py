@@ -26,11 +26,11 @@ import math
 from dataclasses import asdict, dataclass, field, fields, replace
 from numbers import Integral, Real
 
-from .dynamics import UNMATCHED_RULES, check_newmark
-from .element import MAX_SIGMA, MIN_SIGMA
+from .core.dynamics import UNMATCHED_RULES, check_newmark
+from .core.element import MAX_SIGMA, MIN_SIGMA
+from .core.material import MATERIALS, POLYETHYLENE, Material
+from .core.solvers import SOLVERS
 from .errors import OptionError
-from .material import MATERIALS, POLYETHYLENE, Material
-from .solvers import SOLVERS
 
 __all__ = ["MatchOptions", "MorphOptions", "ReadOptions", "OutputOptions", "AlignOptions",
            "TrackOptions", "OPTION_CLASSES", "REFERENCES", "CORRESPONDENCES",

@@ -83,7 +83,7 @@ unmatched, neighbours
     mean of the target nodes of that stretch; it pulls every node of a long run to nearly
     one point, which folds the contour (measured: the 28 pairs of bundled hands at full
     resolution cross themselves). 3D point sets use the (20)-weighted displacements of
-    their ``neighbours`` nearest matched nodes (:class:`modalmorph.dynamics.LoadTargets`).
+    their ``neighbours`` nearest matched nodes (:class:`modalmorph.core.dynamics.LoadTargets`).
 """
 
 from __future__ import annotations
@@ -91,11 +91,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import fields
 
-from .align import align
+from .core.align import align
+from .core.shape import as_shape
 from .errors import MorphDivergedError, OptionError, ShapeError
 from .matching import match
 from .options import MatchOptions, MorphOptions, flat_fields
-from .shape import as_shape
 from .simulation import SPARSE_MODES, Morph, Simulation, check_pairs
 
 __all__ = ["Morph", "MorphDivergedError", "morph", "SPARSE_MODES"]

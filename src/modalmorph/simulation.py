@@ -19,15 +19,15 @@ import numpy as np
 from scipy import linalg
 from scipy.spatial import cKDTree
 
-from .dynamics import LoadTargets, Newmark
-from .element import self_entries
-from .energy import node_energy
+from .core.dynamics import LoadTargets, Newmark
+from .core.element import self_entries
+from .core.energy import node_energy
+from .core.model import FEModel
+from .core.modes import rayleigh
+from .core.quality import Polyline
+from .core.shape import Shape, as_shape, coarsen, resample
 from .errors import MorphDivergedError, OptionError
-from .model import FEModel
-from .modes import rayleigh
 from .options import MatchOptions, MorphOptions, flat_fields
-from .quality import Polyline
-from .shape import Shape, as_shape, coarsen, resample
 
 __all__ = ["Simulation", "Morph", "check_pairs", "SPARSE_MODES"]
 
@@ -234,7 +234,7 @@ class Simulation:
 
     def _build_loads(self) -> None:
         """Where every node is pulled to: its partner (19), or the rule for the others
-        (20) (:class:`modalmorph.dynamics.LoadTargets`)."""
+        (20) (:class:`modalmorph.core.dynamics.LoadTargets`)."""
         o, work, tgt = self.options, self.source, self.target
         self._loads = LoadTargets(self._X1, self._Y, self.pairs, ordered=bool(work.ordered),
                                   closed=work.closed, target_closed=tgt.closed,

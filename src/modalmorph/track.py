@@ -19,12 +19,12 @@ from functools import partial
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .core.quality import curve_distances, self_crossings
+from .core.shape import Shape, as_shape
 from .errors import MorphDivergedError, OptionError, ShapeError
 from .matching import match
 from .options import CORRESPONDENCES, REFERENCES, MatchOptions, MorphOptions, TrackOptions
 from .pipeline import Morph, morph
-from .quality import curve_distances, self_crossings
-from .shape import Shape, as_shape
 
 __all__ = ["REFERENCES", "CORRESPONDENCES", "Track", "TrackOptions", "track",
            "curve_distance"]
@@ -352,7 +352,7 @@ def _segment_of_edge(shape: Shape, edges: np.ndarray, segments: int,
 def curve_distance(a: Shape, b: Shape) -> float:
     """Two-way distance between two objects: the larger of the mean distance of ``a``'s
     nodes to ``b`` and of ``b``'s nodes to ``a`` (to the polyline of an ordered contour,
-    to the nodes of anything else; :func:`modalmorph.quality.curve_distances`), in the
+    to the nodes of anything else; :func:`modalmorph.core.quality.curve_distances`), in the
     user's units."""
     ordered = bool(a.ordered and b.ordered and a.faces is None and b.faces is None)
     d_ab, d_ba = curve_distances(a.points, b.points, closed_a=a.closed, closed_b=b.closed,

@@ -27,7 +27,7 @@ def solve(model, n: int) -> Modes:
     its condition, so a sigma too large for the node set is refused with a clear error;
     the inverse of its Cholesky factor, ``W = L^-T``, whitens ``M_g``.
 
-    ``model`` is a :class:`modalmorph.model.FEModel` (its dense ``gram``,
+    ``model`` is a :class:`modalmorph.core.model.FEModel` (its dense ``gram``,
     ``gamma_condition`` and ``stiffness_gaussian``).
     """
     d, m = model.dim, model.m

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import OptionError, ShapeError
+from ..errors import OptionError, ShapeError
 
 __all__ = ["Similarity", "align"]
 

@@ -228,7 +228,7 @@ def roughness(points, closed: bool = True) -> float:
     node count.
 
     The curve is resampled to 512 nodes evenly spaced by arc length
-    (:func:`modalmorph.shape.resample`) and smoothed along its length by a Gaussian of 4
+    (:func:`modalmorph.core.shape.resample`) and smoothed along its length by a Gaussian of 4
     node spacings (0.8 % of the length; wrap-around for closed curves, point reflection
     about the end nodes for open ones). The roughness is the RMS distance between the
     resampled and the smoothed nodes divided by the RMS radius of the resampled nodes.
@@ -265,7 +265,7 @@ def roughness(points, closed: bool = True) -> float:
 
 def correspondence_rotation(source, target, pairs) -> float:
     """Rotation, in degrees, of the similarity that best maps paired source nodes onto
-    their target partners (Horn, :func:`modalmorph.align`).
+    their target partners (Horn, :func:`modalmorph.core.align`).
 
     Parameters
     ----------

@@ -20,7 +20,7 @@ import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix, diags
 from scipy.spatial import cKDTree
 
-from .align import align
+from ..core.align import align
 
 __all__ = ["refine"]
 

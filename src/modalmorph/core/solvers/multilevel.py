@@ -1,6 +1,6 @@
 """Lowest modes of a large model without a sparse factorisation: coarse start + LOBPCG.
 
-The sparse solver (:func:`modalmorph.solvers.sparse.solve`) factorises
+The sparse solver (:func:`modalmorph.core.solvers.sparse.solve`) factorises
 ``K_g - s M_g``; for 3D point sets, where each node has some 200-300 neighbours within the
 cutoff radius, that factor does not fit in memory beyond a few thousand nodes. This solver
 only multiplies by the full model's sparse matrices:
@@ -23,7 +23,7 @@ The solver assembles its own matrices from them, on its own node order (the leav
 k-d tree, so that neighbours are close in memory): the blocks
 ``K_g^ab_ij = s_ij (-(lambda + mu) / 4 r_a r_b + delta_ab t_ij)`` (``r = x_j - x_i``,
 ``s_ij = Gamma_ij / sigma^4``, ``t_ij = (lambda + mu) sigma^2 / 2 + mu (d sigma^2 / 2 -
-|r|^2 / 4)``: :func:`modalmorph.element.stiffness_components`) are symmetric in ``(a, b)``,
+|r|^2 / 4)``: :func:`modalmorph.core.element.stiffness_components`) are symmetric in ``(a, b)``,
 so ``K_g`` is its ``d (d + 1) / 2`` distinct scalar components,
 six CSR data arrays in 3D over one index structure, and ``M_g`` is the scalar ``Gamma``
 over the same structure (never the d-fold block-diagonal copy);
@@ -60,6 +60,7 @@ import numpy as np
 from scipy import linalg, sparse
 from scipy.spatial import cKDTree
 
+from ...errors import ModelError
 from ..element import (
     gaussian_from_overlap,
     singular_gram,
@@ -67,7 +68,6 @@ from ..element import (
     stiffness_components,
     stiffness_entries,
 )
-from ..errors import ModelError
 from ..modes import Modes
 
 __all__ = ["solve", "Operators", "COARSE_NODES", "MULTILEVEL_CUTOFF", "MULTILEVEL_TOL",
@@ -258,7 +258,7 @@ class Operators:
     ``X`` of shape (d*m, c), component-major.
 
     ``K_g`` is stored as its ``d (d + 1) / 2`` distinct scalar m x m components
-    ``K^ab`` (:func:`modalmorph.element.stiffness_components`), ``Gamma`` as one more, all
+    ``K^ab`` (:func:`modalmorph.core.element.stiffness_components`), ``Gamma`` as one more, all
     over one sparse structure (the pairs within the cutoff and the diagonal). The rows are
     split into ``threads`` blocks of about equal nonzeros, each with its own index arrays;
     a product
@@ -353,7 +353,7 @@ class Operators:
 
     def gram(self, X: np.ndarray) -> np.ndarray:
         """``(I kron G) X``, G from Gamma's entries
-        (:func:`modalmorph.element.gaussian_from_overlap`), one block of rows at a time."""
+        (:func:`modalmorph.core.element.gaussian_from_overlap`), one block of rows at a time."""
         d, m = self.d, self.m
         Xs = X.reshape(d, m, -1)
         Y = np.empty_like(Xs)

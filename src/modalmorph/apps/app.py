@@ -2,8 +2,8 @@
 
 The user picks two shapes (a bundled example or uploaded files), sets the options
 of :func:`modalmorph.match` and :func:`modalmorph.morph` in a form generated from the fields
-of their option classes (:data:`modalmorph.runs.FORM_CLASSES`), runs them,
-follows its progress and explores the result in the viewer of :mod:`modalmorph.report`.
+of their option classes (:data:`modalmorph.apps.runs.FORM_CLASSES`), runs them,
+follows its progress and explores the result in the viewer of :mod:`modalmorph.apps.report`.
 
 The server is the standard library's :class:`http.server.ThreadingHTTPServer`: no
 dependency beyond the readers', nothing leaves the machine, it binds to localhost by
@@ -35,10 +35,10 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
-from . import plot
-from .datasets import hand_shape, heart_shape
-from .io import SUPPORTED_EXTENSIONS, read_shape, save_result
-from .options import flat_fields
+from .. import figures
+from ..datasets import hand_shape, heart_shape
+from ..io import SUPPORTED_EXTENSIONS, read_shape, save_result
+from ..options import flat_fields
 from .report import image_data, image_size, render_page, result_payload, write_html
 from .runs import FORM_CLASSES, Settings, compute_morph, default_text
 
@@ -67,7 +67,7 @@ _FILES = ("morph.json", "result.json", "shapes.npz", "final_shape.csv", "report.
 
 
 def morph_options() -> list[dict]:
-    """The form: one entry per option of :data:`modalmorph.runs.FORM_CLASSES` (matching,
+    """The form: one entry per option of :data:`modalmorph.apps.runs.FORM_CLASSES` (matching,
     physics, loads and time integration, stopping), by flat name.
 
     Generated from the fields' metadata, so that a new option appears in the form by
@@ -181,9 +181,9 @@ class _Job:
         elif name == "report.html":
             write_html(r, out / name, title=self.title, images=self.images)
         elif name == "morph.gif":
-            plot.animate(r, out / name)
+            figures.animate(r, out / name)
         else:
-            plot.save_figures(r, out, formats=("png",), dpi=120)
+            figures.save_figures(r, out, formats=("png",), dpi=120)
 
 
 def _field_of(message: str) -> str | None:

@@ -32,7 +32,7 @@ In detail:
   where it starts. Coordinates are the file's user units (before any ``viewBox``
   scaling), y pointing down (:data:`SVG_FRAME`).
 - images: the outer contour of one object, in pixel coordinates ``(x, y) = (column,
-  row)``, y pointing down (the shape's :class:`~modalmorph.shape.ImageFrame` names the
+  row)``, y pointing down (the shape's :class:`~modalmorph.core.shape.ImageFrame` names the
   image, drawn under the figures). A two-level image is a mask; a grey-level image needs
   ``threshold``. Whichever side covers most of the image border is the background, so
   dark objects on a light background work too. Colour is converted to grey; an alpha
@@ -79,10 +79,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .options import OBJECTS
-from .quality import area
-from .shape import ImageFrame, Shape, resample
-from .version import __version__
+from ..core.quality import area
+from ..core.shape import ImageFrame, Shape, resample
+from ..options import OBJECTS
+from ..version import __version__
 
 __all__ = [
     "DEFAULT_NODES",
@@ -179,7 +179,7 @@ def read_shape(path, *, nodes: int | None = None, threshold: float | None = None
     -------
     Shape
         2D shapes are ordered contours; 3D shapes are surfaces (with ``faces``) or point
-        clouds. Shapes from images and SVG carry an :class:`~modalmorph.shape.ImageFrame`
+        clouds. Shapes from images and SVG carry an :class:`~modalmorph.core.shape.ImageFrame`
         (y down; the image file, drawn under the figures).
 
     Raises

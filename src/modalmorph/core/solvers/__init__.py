@@ -1,7 +1,7 @@
 """The eigensolvers of a model, behind one dispatch.
 
 Each solver is a module with ``solve(model, n) -> Modes`` for an
-:class:`~modalmorph.model.FEModel`:
+:class:`~modalmorph.core.model.FEModel`:
 
 - :mod:`.dense`: the exact model, every interaction, LAPACK; all modes or the lowest.
 - :mod:`.sparse`: the truncated model (interactions beyond ``cutoff_radius`` dropped),
@@ -18,8 +18,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from ...errors import OptionError
 from ..element import AUTO_DENSE_MAX_DOF, DEFAULT_CUTOFF
-from ..errors import OptionError
 from ..modes import Modes
 from . import dense, multilevel, sparse
 

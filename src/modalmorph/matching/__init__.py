@@ -15,7 +15,7 @@ searches are offered:
 ``"auto"`` (default)
     The modal description made invariant to what the paper leaves open (pose, eigenvector
     sign, rotations inside degenerate eigenspaces, mode order), combined with position,
-    and alternated with Horn's alignment (:func:`modalmorph.align.align`) and a smooth
+    and alternated with Horn's alignment (:func:`modalmorph.core.align.align`) and a smooth
     deformation in the lowest modes. Ordered contours are matched by an order-preserving
     (cyclic for closed ones) search; point clouds by assignment. Its stages, in order:
     :func:`_prepare` (modes and signatures), :func:`_contour_pose` or :func:`_cloud_pose`
@@ -34,13 +34,13 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
-from .align import Similarity, align
-from .errors import OptionError, ShapeError
-from .match3d import refine
-from .model import FEModel
-from .options import METHODS, ROTATIONS, MatchOptions
-from .quality import area
-from .shape import Shape, as_shape, resample, spread_indices
+from ..core.align import Similarity, align
+from ..core.model import FEModel
+from ..core.quality import area
+from ..core.shape import Shape, as_shape, resample, spread_indices
+from ..errors import OptionError, ShapeError
+from ..options import METHODS, ROTATIONS, MatchOptions
+from .clouds import refine
 
 __all__ = ["Matching", "match", "modal_features", "affinity", "METHODS", "ROTATIONS"]
 
@@ -232,7 +232,7 @@ def modal_features(shape, n_modes: int, *, sigma: float | None = None,
         Number of modes, lowest first.
     sigma : float or None, optional
         Gaussian width as a multiple of the model's mean node spacing; ``None``:
-        ``DEFAULT_SIGMA`` or less, as :func:`modalmorph.element.auto_sigma` chooses.
+        ``DEFAULT_SIGMA`` or less, as :func:`modalmorph.core.element.auto_sigma` chooses.
     max_nodes : int, optional
         Largest model built (the eigenproblem is dense: cost grows as nodes cubed).
 
@@ -970,7 +970,7 @@ def _match_cloud(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
                  ) -> tuple[np.ndarray, np.ndarray, Similarity]:
     """The default matcher for unordered 3D point sets: the modal matcher (above ``LARGE``
     nodes on one coarse node per ``NODES_PER_COARSE_CLOUD``, from ``COARSE`` to
-    ``COARSE_CLOUD``), then :func:`modalmorph.match3d.refine`,
+    ``COARSE_CLOUD``), then :func:`modalmorph.matching.clouds.refine`,
     then each source node paired with the target node nearest to where it lands; pairs
     farther than ``sqrt(reject)`` target spacings are dropped. Cost in squared target
     spacings."""

@@ -5,7 +5,7 @@ a result given as JSON (:func:`result_payload`): the intermediate shapes with a 
 slider and play button, coloured plain, by load or by local strain energy with a colour
 bar, the matches, the energy and distance curves, and the load and energy of the node
 under the pointer. :func:`write_html` inlines the JSON into the page, giving one file
-that opens from disk; :mod:`modalmorph.app` serves the same page with a form around it.
+that opens from disk; :mod:`modalmorph.apps.app` serves the same page with a form around it.
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .io import atomic_write
-from .version import __version__
+from ..io import atomic_write
+from ..version import __version__
 
 __all__ = ["image_data", "image_size", "input_images", "render_page", "result_payload",
            "write_html"]
@@ -153,7 +153,7 @@ def _json_value(obj):
 
 def render_page(payload: dict | None) -> str:
     """The viewer page with ``payload`` inlined, or empty (``None``) for the app."""
-    page = resources.files("modalmorph").joinpath("web", "viewer.html").read_text("utf-8")
+    page = resources.files("modalmorph").joinpath("apps", "web", "viewer.html").read_text("utf-8")
     if payload is None:
         return page
     # "</" would end the script element early; "<\/" is the same JSON string

@@ -2,8 +2,8 @@
 
 Each item of a batch is one ``modalmorph morph`` (a source, target pair) or one
 ``modalmorph track`` (a sequence of frames); it is computed and written by a worker into
-``OUT/<id>/``, exactly as the single command writes it (:func:`modalmorph.runs.morph_files`,
-:func:`modalmorph.runs.track_files`). The folder appears at once, by one rename of a
+``OUT/<id>/``, exactly as the single command writes it (:func:`modalmorph.apps.runs.morph_files`,
+:func:`modalmorph.apps.runs.track_files`). The folder appears at once, by one rename of a
 finished staging folder, so a killed run leaves every item folder complete or absent, and
 an item whose folder exists is skipped on the next run. A failing item is recorded with its
 one-line message and the batch goes on. ``OUT/summary.csv`` (and ``summary.parquet`` with
@@ -28,10 +28,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
-from .errors import OptionError
-from .io import atomic_write
-from .options import OutputOptions
-from .plot import plot_batch
+from ..errors import OptionError
+from ..figures import plot_batch
+from ..io import atomic_write
+from ..options import OutputOptions
 from .runs import BATCH_CLASSES, Settings, morph_files, track_files
 
 __all__ = ["FIGURES", "ENGINES", "Engine", "Item", "ItemResult", "Batch", "read_manifest",
@@ -419,7 +419,7 @@ def run(items: Sequence[Item], out, *, settings: Settings | None = None,
     out : str or os.PathLike
         Output folder: ``out/<id>/`` per item, and the summary.
     settings : Settings, optional
-        Options for every item (:class:`modalmorph.runs.Settings`); an item's own win.
+        Options for every item (:class:`modalmorph.apps.runs.Settings`); an item's own win.
     figures : {"none", "summary", "all"}, optional
         ``"none"`` (default): results only; ``"summary"``: also ``out/summary.png``,
         rendered once; ``"all"``: each item's figures and animation too, rendered by its

@@ -8,9 +8,10 @@ Every integral is over all of R^d and has a closed form (method.md §1). With
 - ``D^ab_ij = V e_ij / sigma^4 (delta_ab sigma^2 / 2 - r_a r_b / 4)``  (of dg_i/dx_a dg_j/dx_b)
 
 The physical matrices use ``A = G^-1``: ``M = rho (I_d kron A Gamma A)`` and
-``K_ab = A [(lambda + mu) D^ab + mu delta_ab sum_c D^cc] A`` (:class:`modalmorph.model.FEModel`
-assembles them). This module holds the entries, the choice and the checks of sigma, and the
-radius beyond which a truncated model drops an interaction: every entry decays like
+``K_ab = A [(lambda + mu) D^ab + mu delta_ab sum_c D^cc] A``
+(:class:`modalmorph.core.model.FEModel` assembles them). This module holds the entries,
+the choice and the checks of sigma, and the radius beyond which a truncated model drops
+an interaction: every entry decays like
 ``exp(-|r|^2 / (4 sigma^2))`` and sigma is a multiple of the node spacing, so each node
 interacts with a bounded number of others.
 """
@@ -19,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import ModelError, OptionError
+from ..errors import ModelError, OptionError
 from .shape import as_shape
 
 __all__ = ["DEFAULT_SIGMA", "AUTO_CONDITION", "MAX_CONDITION", "MIN_SIGMA", "MAX_SIGMA",

@@ -5,7 +5,7 @@ The option flags are generated from the fields of the option classes
 (:mod:`modalmorph.options`, :class:`modalmorph.options.AlignOptions`,
 :class:`modalmorph.options.TrackOptions`): a flag per flat name, its help and default from
 the field, grouped by the field's group; a ``--config`` TOML file takes the same flat
-names, and the command line wins over it. What one run does is :mod:`modalmorph.runs`.
+names, and the command line wins over it. What one run does is :mod:`modalmorph.apps.runs`.
 """
 
 from __future__ import annotations
@@ -18,14 +18,15 @@ import time
 import warnings
 from pathlib import Path
 
+from ..datasets import hand_shape, heart_shape
+from ..errors import MorphDivergedError, OptionError
+from ..figures import plot_matches
+from ..io import atomic_output_dir, atomic_write
+from ..matching import match
+from ..options import MatchOptions, ReadOptions, flat_fields
+from ..version import __version__
 from . import batch
 from .app import serve
-from .datasets import hand_shape, heart_shape
-from .errors import MorphDivergedError, OptionError
-from .io import atomic_output_dir, atomic_write
-from .matching import match
-from .options import MatchOptions, ReadOptions, flat_fields
-from .plot import plot_matches
 from .runs import (
     BATCH_CLASSES,
     PAIR_CLASSES,
@@ -39,7 +40,6 @@ from .runs import (
     track_files,
     write_morph,
 )
-from .version import __version__
 
 __all__ = ["main", "build_parser", "add_option_flags", "flag_help", "load_config",
            "EXIT_CODES"]

@@ -1,8 +1,8 @@
 """What one run of the command line does: read the inputs, compute, write one output folder.
 
 :func:`morph_files` (``modalmorph morph``) and :func:`track_files` (``modalmorph track``)
-are shared by the command line, the batch workers (:mod:`modalmorph.batch`) and the web
-app (:mod:`modalmorph.app`). Their options are :class:`Settings`: one option object per
+are shared by the command line, the batch workers (:mod:`modalmorph.apps.batch`) and the web
+app (:mod:`modalmorph.apps.app`). Their options are :class:`Settings`: one option object per
 stage (:mod:`modalmorph.options`), so that the flags, the config file, the form and the
 record in ``result.json`` are generated from all of them alike (flat names:
 :func:`modalmorph.options.flat_fields`).
@@ -19,12 +19,12 @@ from pathlib import Path
 
 from threadpoolctl import threadpool_limits
 
-from . import plot
-from .errors import OptionError, ShapeError
-from .io import atomic_output_dir, read_frames, read_shape, save_result, save_track
-from .matching import match
-from .material import Material
-from .options import (
+from .. import figures
+from ..core.material import Material
+from ..errors import OptionError, ShapeError
+from ..io import atomic_output_dir, read_frames, read_shape, save_result, save_track
+from ..matching import match
+from ..options import (
     AlignOptions,
     MatchOptions,
     MorphOptions,
@@ -34,9 +34,9 @@ from .options import (
     flat_fields,
     split,
 )
-from .pipeline import morph
+from ..pipeline import morph
+from ..track import track
 from .report import input_images, write_html
-from .track import track
 
 __all__ = ["Settings", "ItemRun", "PAIR_CLASSES",
            "SEQUENCE_CLASSES", "BATCH_CLASSES", "FORM_CLASSES", "ONE_THREAD_NODES",
@@ -212,13 +212,13 @@ def write_morph(result, folder: Path, settings: Settings, *, inputs=(), images=N
     if output.figures or output.gif or output.mp4:
         look = dict(frames=output.frames, background=output.background)
         if output.figures:
-            plot.save_figures(result, folder, formats=("png", "svg") if output.svg else
+            figures.save_figures(result, folder, formats=("png", "svg") if output.svg else
                               ("png",), **look)
         for wanted, name in ((output.gif, "morph.gif"), (output.mp4, "morph.mp4")):
             if wanted:
-                plot.animate(result, folder / name, **look)
+                figures.animate(result, folder / name, **look)
     if output.vtk:
-        plot.write_vtk_series(result, folder / "vtk")
+        figures.write_vtk_series(result, folder / "vtk")
     if output.html:
         title = None if images is None else f"{images[0].name} → {images[1].name}"
         write_html(result, folder / "report.html", title=title,
@@ -257,10 +257,10 @@ def _write_track_renderings(result, folder: Path, output: OutputOptions) -> None
     if not (output.figures or output.gif or output.mp4):
         return
     if output.figures:
-        plot.save_track_figures(result, folder)
+        figures.save_track_figures(result, folder)
     for wanted, name in ((output.gif, "track.gif"), (output.mp4, "track.mp4")):
         if wanted:
-            plot.animate_track(result, folder / name)
+            figures.animate_track(result, folder / name)
 
 
 @contextlib.contextmanager

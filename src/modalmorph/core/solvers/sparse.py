@@ -34,7 +34,7 @@ def solve(model, n: int) -> Modes:
     Gamma's condition) is detected by the condition number of the truncated Gamma
     (estimated with two Lanczos runs), a failed factorisation, or large residuals, and
     refused with a :class:`~modalmorph.errors.ModelError`. ``model`` is a
-    :class:`modalmorph.model.FEModel` (its ``gram_sparse`` and
+    :class:`modalmorph.core.model.FEModel` (its ``gram_sparse`` and
     ``stiffness_gaussian_sparse``).
     """
     d, m = model.dim, model.m

@@ -13,7 +13,7 @@ source, ``loads`` (T+1, m, d), ``energy`` (T+1,), ``node_energy`` (T+1, m),
 ``mean_distance`` (T+1,), ``matching.pairs`` (K, 2), ``similarity``, ``source``,
 ``target``, ``converged`` and ``stop_reason``.
 
-Shapes in image coordinates (a :class:`~modalmorph.shape.ImageFrame` on the target, as
+Shapes in image coordinates (a :class:`~modalmorph.core.shape.ImageFrame` on the target, as
 read from an image or SVG) are drawn with y pointing down, their axes in pixels, over
 the image they were read from unless ``background=False``. Others are drawn with y up,
 in the input's units.
@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .options import FRAME_SPACINGS
+from ..options import FRAME_SPACINGS
 
 __all__ = [
     "MAX_ANIMATION_FRAMES",
@@ -651,7 +651,7 @@ def plot_batch(results, *, ax=None):
     Parameters
     ----------
     results : sequence of ItemResult
-        The rows of :func:`modalmorph.batch.run` (``Batch.results``); items without
+        The rows of :func:`modalmorph.apps.batch.run` (``Batch.results``); items without
         numbers (failed, interrupted) are counted in the title.
     ax : matplotlib Axes, optional
 

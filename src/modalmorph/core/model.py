@@ -2,13 +2,13 @@
 material and the matrices its eigensolvers need.
 
 :class:`FEModel` assembles, lazily and once, the matrices of the element
-(:mod:`modalmorph.element`) in one of two representations, by the kind of its solver
+(:mod:`modalmorph.core.element`) in one of two representations, by the kind of its solver
 (:attr:`FEModel.truncated`): dense ``G``, ``Gamma`` and ``K_g`` for the exact model, or
 sparse ones that keep only the pairs of nodes closer than :attr:`FEModel.cutoff_radius`
 (``gram_sparse``, ``stiffness_gaussian_sparse``: no m x m matrix is formed). The
 multilevel solver assembles its own working copy from :attr:`FEModel.pairs`
-(:mod:`modalmorph.solvers.multilevel`). :meth:`FEModel.modes` returns the frozen
-:class:`~modalmorph.modes.Modes` from the solver :mod:`modalmorph.solvers` chose.
+(:mod:`modalmorph.core.solvers.multilevel`). :meth:`FEModel.modes` returns the frozen
+:class:`~modalmorph.core.modes.Modes` from the solver :mod:`modalmorph.core.solvers` chose.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import numpy as np
 from scipy import linalg, sparse
 from scipy.spatial import cKDTree
 
+from ..errors import ModelError, OptionError
 from . import solvers
 from .element import (
     DEFAULT_SIGMA,
@@ -30,7 +31,6 @@ from .element import (
     singular_gram,
     stiffness_entries,
 )
-from .errors import ModelError, OptionError
 from .material import POLYETHYLENE, Material
 from .modes import Modes
 from .shape import Shape, as_shape, coarsen
@@ -62,7 +62,7 @@ class FEModel:
         nodes further apart (smoother low modes) but make the Gram matrices
         ill-conditioned. ``None`` (default): ``DEFAULT_SIGMA`` (1) unless that makes
         ``Gamma`` ill-conditioned for this node set, then the largest width that does not
-        (:func:`~modalmorph.element.auto_sigma`). A given value is used as it is, and
+        (:func:`~modalmorph.core.element.auto_sigma`). A given value is used as it is, and
         refused with a ``ModelError`` (naming the largest width that works) when the Gram
         matrix is numerically singular. The width used is :attr:`sigma_rel`.
     nominal_sigma : float, optional
@@ -81,15 +81,15 @@ class FEModel:
         for 3D point sets. ``"multilevel"``: the same truncated matrices, no
         factorisation; the lowest ``n`` modes of a coarse model give the starting
         subspace of a preconditioned LOBPCG iteration on the full model, stopped when
-        every residual is below a tolerance (:mod:`modalmorph.solvers.multilevel`;
+        every residual is below a tolerance (:mod:`modalmorph.core.solvers.multilevel`;
         iterative, so less accurate than the others: see there). ``"auto"`` (default)
         picks dense up to ``AUTO_DENSE_MAX_DOF`` degrees of freedom (``d * m``),
         multilevel for 3D shapes of ``AUTO_MULTILEVEL_MIN_NODES`` nodes or more, and
-        sparse otherwise (:func:`modalmorph.solvers.choose`). The resolved choice is
+        sparse otherwise (:func:`modalmorph.core.solvers.choose`). The resolved choice is
         :attr:`solver`; the sparse and multilevel models are :attr:`truncated`.
     cutoff : float, optional
         Sparse and multilevel solvers: the relative size below which interactions are
-        dropped (see :func:`~modalmorph.element.cutoff_radius`; default 1e-10, a radius of
+        dropped (see :func:`~modalmorph.core.element.cutoff_radius`; default 1e-10, a radius of
         10.3 sigma, and ``MULTILEVEL_CUTOFF`` = 1e-6, 8.1 sigma, for the multilevel
         solver). This
         truncation is the sparse model's only approximation: with 1e-10, its lowest
@@ -403,7 +403,7 @@ class FEModel:
 
         With the sparse and multilevel solvers ``n`` is required and must be below
         ``d * m - 1``. The multilevel solver raises a ModelError when it does not
-        converge (see :mod:`modalmorph.solvers.multilevel`).
+        converge (see :mod:`modalmorph.core.solvers.multilevel`).
 
         Returns
         -------
@@ -458,7 +458,7 @@ class FEModel:
 
     def coarsened(self, nodes: int) -> FEModel:
         """The same model (sigma, material, plane, cutoff; solver ``"auto"``) of at most
-        ``nodes`` nodes spread evenly over the object (:func:`modalmorph.shape.coarsen`)."""
+        ``nodes`` nodes spread evenly over the object (:func:`modalmorph.core.shape.coarsen`)."""
         return FEModel(coarsen(self.shape, nodes), sigma=self.sigma_rel,
                        material=self.material, plane=self.plane, cutoff=self.cutoff)
 
