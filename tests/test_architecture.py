@@ -276,7 +276,8 @@ def test_method_md_citations_exist():
 def test_the_checks_see_the_package():
     """The rules above are vacuous if the walk finds nothing: it must see the modules, the
     imports between them, and long functions where they are obviously present."""
-    assert {f"{PACKAGE}.core.element", f"{PACKAGE}.matching", f"{PACKAGE}.pipeline"} <= set(MODULES)
+    assert {f"{PACKAGE}.core.element", f"{PACKAGE}.matching",
+            f"{PACKAGE}.pipeline"} <= set(MODULES)
     assert sum(len(v) for v in _graph().values()) > 10
     assert _cycles({"a": {"b": [1]}, "b": {"a": [2]}, "c": {"a": [3]}}) == [["a", "b"]]
     fn = ast.parse("def f(a, b, *, options=None, **overrides):\n    '''doc'''\n    x = 1\n"

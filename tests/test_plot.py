@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from modalmorph.io import write_vtk_series
+
 pytest.importorskip("matplotlib")
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.axes import Axes  # noqa: E402
@@ -22,7 +24,6 @@ from modalmorph.figures import (  # noqa: E402
     plot_matches,
     plot_shapes,
     save_figures,
-    write_vtk_series,
 )
 
 T = 10

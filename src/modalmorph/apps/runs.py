@@ -22,7 +22,14 @@ from threadpoolctl import threadpool_limits
 from .. import figures
 from ..core.material import Material
 from ..errors import OptionError, ShapeError
-from ..io import atomic_output_dir, read_frames, read_shape, save_result, save_track
+from ..io import (
+    atomic_output_dir,
+    read_frames,
+    read_shape,
+    save_result,
+    save_track,
+    write_vtk_series,
+)
 from ..matching import match
 from ..options import (
     AlignOptions,
@@ -218,7 +225,7 @@ def write_morph(result, folder: Path, settings: Settings, *, inputs=(), images=N
             if wanted:
                 figures.animate(result, folder / name, **look)
     if output.vtk:
-        figures.write_vtk_series(result, folder / "vtk")
+        write_vtk_series(result, folder / "vtk")
     if output.html:
         title = None if images is None else f"{images[0].name} → {images[1].name}"
         write_html(result, folder / "report.html", title=title,

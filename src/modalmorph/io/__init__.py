@@ -83,8 +83,10 @@ from ..core.quality import area
 from ..core.shape import ImageFrame, Shape, resample
 from ..options import OBJECTS
 from ..version import __version__
+from .vtk import write_vtk_series
 
 __all__ = [
+    "write_vtk_series",
     "DEFAULT_NODES",
     "Frames",
     "INSIDE_FRACTION",
