@@ -61,7 +61,7 @@ def split(source, target, folder: Path) -> dict:
     parts, start = {}, time.perf_counter()
     result = compute_morph(source, target, settings)
     parts["compute"], start = time.perf_counter() - start, time.perf_counter()
-    save_result(result, folder, params=result.params, options=settings.record())
+    save_result(result, folder, options=settings.record())
     parts["results"], start = time.perf_counter() - start, time.perf_counter()
     figures.save_figures(result, folder, formats=("png",))  # the command line's default
     parts["figures"], start = time.perf_counter() - start, time.perf_counter()

@@ -43,10 +43,10 @@ def dense_modes(points):
     model = mm.FEModel(points)
     x = model.points
     r = x[None] - x[:, None]
-    G, Gamma = gram_entries(r, model.sigma)
+    G, Gamma = gram_entries(r, model.width)
     lam, mu = model.lame
     d, m = 2, len(x)
-    Kg = stiffness_entries(r, model.sigma, lam, mu).transpose(2, 0, 3, 1).reshape(d * m, -1)
+    Kg = stiffness_entries(r, model.width, lam, mu).transpose(2, 0, 3, 1).reshape(d * m, -1)
     A = np.kron(np.eye(d), np.linalg.inv(G))
     M = model.material.rho * A @ np.kron(np.eye(d), Gamma) @ A
     K = A @ Kg @ A

@@ -58,7 +58,7 @@ def test_parse_options_reads_the_form():
                               "material": "1e5 0.3 1000", "match_sigma": "1.5"})
     assert settings.morph.k == 50 and settings.morph.damping == (0.5, 1.0)
     assert settings.morph.modes == pytest.approx(2 / 3) and settings.morph.sigma is None
-    assert settings.align.remove_rigid and settings.morph.scheme == "explicit"
+    assert settings.morph.remove_rigid and settings.morph.scheme == "explicit"
     assert settings.morph.material.E == 1e5 and settings.match.sigma == 1.5
     with pytest.raises(ValueError, match="k must be a number, got 'abc'"):
         parse_options({"k": "abc"})
@@ -299,7 +299,7 @@ def _compare_with_library(data: dict, result):
     assert_allclose(data["energy"], result.energy, rtol=1e-9, atol=1e-12)
     assert_allclose(data["mean_distance"], result.mean_distance, rtol=1e-9)
     assert data["pairs"] == result.matching.pairs.tolist()
-    assert data["stop_reason"] == result.stop_reason
+    assert data["stop_reason"] == result.message
 
 
 def test_app_in_browser(server, browser, downloads, heart_result, tmp_path):
@@ -333,7 +333,7 @@ def test_app_in_browser(server, browser, downloads, heart_result, tmp_path):
     rigid.click()
     browser.find_element(By.ID, "run").click()
     _wait(browser, lambda b: _ready(b) == "result", "the morph's result")
-    assert browser.find_element(By.ID, "run-msg").text == heart_result.stop_reason
+    assert browser.find_element(By.ID, "run-msg").text == heart_result.message
 
     last = _to_last_step(browser)
     assert last == heart_result.steps

@@ -5,7 +5,6 @@ import os
 import re
 import subprocess
 import sys
-import types
 
 import numpy as np
 import pytest
@@ -25,6 +24,7 @@ from modalmorph.io import (
     save_result,
     write_points,
 )
+from modalmorph.options import parameters
 
 # A small non-symmetric 2D contour (a pentagon-ish outline) and a 3D point set.
 SQUARE = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.5, 1.5], [0.0, 1.0]])
@@ -627,27 +627,17 @@ def test_write_points_errors(tmp_path):
 # -- results and atomic output -------------------------------------------------------------
 
 
-def _fake_morph(rng, steps=4, m=6, k=5):
-    """Stands in for the pipeline's result object, with the fields save_result reads."""
-    source = Shape(rng.normal(size=(m, 2)))
-    target = Shape(rng.normal(size=(m + 2, 2)))
-    shapes = source.points + np.linspace(0, 1, steps + 1)[:, None, None] * rng.normal(
-        size=(1, m, 2))
-    energy = np.r_[0.0, rng.random(steps)]
-    return types.SimpleNamespace(
-        shapes=shapes, loads=rng.normal(size=shapes.shape), energy=energy,
-        node_energy=rng.random((steps + 1, m)), mean_distance=np.linspace(2, 0.1, steps + 1),
-        matching=types.SimpleNamespace(pairs=np.column_stack([np.arange(k), np.arange(k)])),
-        similarity=None, converged=True, stop_reason="mean distance below tolerance",
-        source=source, target=target, steps=steps)
+def _small_morph():
+    """A real morph of a 12-node circle onto an ellipse, from given pairs."""
+    a = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
+    circle, ellipse = np.c_[np.cos(a), np.sin(a)], np.c_[1.5 * np.cos(a), np.sin(a)]
+    return modalmorph.morph(circle, ellipse, matching=np.c_[0:12:2, 0:12:2], max_steps=5)
 
 
-def test_save_result(tmp_path, rng):
-    morph = _fake_morph(rng)
-    params = {"material": "rubber", "dt": np.float64(0.01), "steps": np.int64(4),
-              "sigma": np.array([1.0, 2.0]), "source": tmp_path / "a.csv", "nothing": None}
+def test_save_result(tmp_path):
+    morph = _small_morph()
     inputs = [{"path": "/data/a.csv", "sha256": "0" * 64}]
-    save_result(morph, tmp_path / "out", params=params, options={"k": 100.0}, inputs=inputs)
+    save_result(morph, tmp_path / "out", options={"k": 100.0}, inputs=inputs)
     out = tmp_path / "out"
     assert sorted(p.name for p in out.iterdir()) == ["final_shape.csv", "result.json",
                                                     "shapes.npz"]
@@ -655,12 +645,14 @@ def test_save_result(tmp_path, rng):
     assert result == {
         "modalmorph_version": modalmorph.__version__, "inputs": inputs,
         "options": {"k": 100.0},
-        "parameters": {"material": "rubber", "dt": 0.01, "steps": 4, "sigma": [1.0, 2.0],
-                       "source": str(tmp_path / "a.csv"), "nothing": None},
-        "converged": True, "stop_reason": "mean distance below tolerance", "steps": 4,
-        "matches": 5, "source_nodes": 6, "target_nodes": 8, "dim": 2,
+        "parameters": json.loads(json.dumps(parameters(morph))),
+        "converged": morph.converged, "stop_reason": morph.stop_reason,
+        "message": morph.message, "distance": morph.distance, "tolerance": morph.tolerance,
+        "steps": morph.steps, "matches": 6, "source_nodes": 12, "target_nodes": 12, "dim": 2,
         "mean_distance": morph.mean_distance.tolist(), "energy": morph.energy.tolist(),
     }
+    assert result["parameters"]["k"] == morph.options.k
+    assert result["parameters"]["model_nodes"] == morph.resolved.model_nodes == 12
     with np.load(out / "shapes.npz") as data:
         assert sorted(data.files) == ["energy", "loads", "mean_distance", "node_energy",
                                       "pairs", "shapes"]
@@ -670,9 +662,9 @@ def test_save_result(tmp_path, rng):
     assert_array_equal(read_shape(out / "final_shape.csv").points, morph.shapes[-1])
 
 
-def test_save_result_rejects_unwritable_params(tmp_path, rng):
-    with pytest.raises(ValueError, match="params cannot be written as JSON"):
-        save_result(_fake_morph(rng), tmp_path / "out", params={"f": object()})
+def test_save_result_rejects_unwritable_options(tmp_path):
+    with pytest.raises(ValueError, match="options cannot be written as JSON"):
+        save_result(_small_morph(), tmp_path / "out", options={"f": object()})
     assert not (tmp_path / "out").exists()
 
 

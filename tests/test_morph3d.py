@@ -27,7 +27,7 @@ def test_truncated_basis_carries_the_similarity():
     src, tgt, truth = case(600, 60, 0.0)
     pairs = np.c_[np.arange(600), cKDTree(tgt).query(truth)[1]]
     r = mm.morph(src, tgt, matching=pairs, model_nodes=600, solver="sparse", modes=100)
-    assert r.converged, r.stop_reason
+    assert r.converged, r.message
     assert max(both_ways(r.shapes[-1], tgt)) < END_SPACINGS
     sim = Simulation(mm.Shape(src), mm.Shape(tgt), pairs,
                      mm.MorphOptions(model_nodes=600, solver="sparse", modes=100))
@@ -42,6 +42,6 @@ def test_matcher_driven_morph_converges():
     stop test measures the surfaces both ways, so the morph converges onto the target."""
     src, tgt, truth = case(2000, 90, 0.0)
     r = mm.morph(src, tgt, matching=mm.match(src, tgt))
-    assert r.converged, r.stop_reason
+    assert r.converged, r.message
     assert max(both_ways(r.shapes[-1], tgt)) < END_SPACINGS
     assert r.distance <= 0.005 * mm.Shape(tgt).size

@@ -151,7 +151,7 @@ def test_morph_auto_picks_multilevel():
     a = sphere_points(m, rng, radii=(1.0, 0.8, 0.6))
     b = a * np.array([1.2, 0.7, 0.9]) + 0.1 * np.sin(3 * a[:, [1, 2, 0]])
     r = morph(a, b, matching=np.c_[np.arange(m), np.arange(m)], model_nodes=m)
-    assert r.params["solver"] == "multilevel" and r.params["modes"] == SPARSE_MODES
+    assert r.resolved.solver == "multilevel" and r.resolved.modes == SPARSE_MODES
     assert np.all(np.isfinite(r.shapes))
     # measured 0.216 -> 0.119 (equilibrium: 100 of 7500 modes; see the test above)
     assert r.mean_distance[-1] < 0.7 * r.mean_distance[0]

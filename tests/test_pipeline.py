@@ -1,12 +1,15 @@
 """morph(): the paper's findings as trends, and the invariants of the method."""
 
+import json
+
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from modalmorph import MatchOptions, MorphOptions, match
+from modalmorph import FEModel, Matching, MatchOptions, MorphOptions, match, track
 from modalmorph.datasets import load_hand, load_hands
-from modalmorph.errors import OptionError
+from modalmorph.errors import OptionError, ShapeError
+from modalmorph.options import parameters
 from modalmorph.pipeline import MorphDivergedError, morph
 
 from .conftest import self_intersections, sphere_points
@@ -61,7 +64,7 @@ def test_result_fields_consistent():
     assert r.energy[0] == 0
     d = np.linalg.norm(r.shapes[:, pairs[:, 0]] - b[pairs[:, 1]], axis=2).mean(axis=1)
     assert_allclose(r.mean_distance, d, rtol=1e-12)
-    assert r.params["k"] == 100.0 and r.stop_reason.startswith("converged")
+    assert r.options.k == 100.0 and r.stop_reason == "tolerance"
 
 
 def test_identity_does_not_move():
@@ -92,7 +95,7 @@ def test_two_thirds_of_modes_slower_and_less_accurate():
     a, b, pairs = _hands(2, 7, 70)
     full = morph(a, b, matching=pairs, tol=0.002, max_steps=60)
     part = morph(a, b, matching=pairs, modes=2 / 3, tol=0.002, max_steps=60)
-    assert part.params["modes"] == round(2 / 3 * 140)
+    assert part.resolved.modes == round(2 / 3 * 140)
     assert part.steps > full.steps
     assert part.mean_distance[-1] > full.mean_distance[-1]
 
@@ -201,7 +204,7 @@ def test_reduced_model_for_large_contours():
     a, b = _dense_hands(2000)
     pairs = np.c_[np.arange(2000), np.arange(2000)]
     r = morph(a, b, matching=pairs, model_nodes=200)
-    assert r.params["model_nodes"] == 200 and r.converged
+    assert r.resolved.model_nodes == 200 and r.converged
     assert r.mean_distance[-1] <= 0.01 * _rms(b)
     # local energies spread from the model nodes still add up to the global energy
     assert_allclose(r.node_energy.sum(axis=1), r.energy, atol=1e-9 * r.energy.max())
@@ -246,7 +249,7 @@ def test_options_object_same_as_keywords():
     for r in (by_object, mixed):
         assert_array_equal(r.shapes, by_keywords.shapes)  # bitwise: the same computation
         assert r.options == by_keywords.options == MorphOptions(**kw)
-        assert r.params == by_keywords.params
+        assert parameters(r) == parameters(by_keywords)
 
 
 def test_overrides_routed_to_the_matcher():
@@ -255,8 +258,8 @@ def test_overrides_routed_to_the_matcher():
     assert r.match_options == MatchOptions(rotation="none", sigma=1.5, method="global")
     assert_array_equal(r.matching.pairs,
                        match(a, b, rotation="none", sigma=1.5, method="global").pairs)
-    assert r.params["rotation"] == "none" and r.params["match_sigma"] == 1.5
-    assert r.params["max_steps"] == 2 and r.options.max_steps == 2
+    assert r.match_options.rotation == "none" and r.match_options.sigma == 1.5
+    assert parameters(r)["max_steps"] == 2 and r.options.max_steps == 2
     # a MatchOptions as the matching: computed with those, overrides on top
     given = morph(a, b, matching=MatchOptions(method="global"), rotation="none",
                   match_sigma=1.5, max_steps=2)
@@ -272,3 +275,47 @@ def test_unknown_or_bad_override_refused(kwargs, match):
     a, b, pairs = _hands(0, 3, 40)
     with pytest.raises(OptionError, match=match):
         morph(a, b, **kwargs)
+
+
+def test_given_pairs_are_a_matching_that_saves_reports_plots_and_tracks(tmp_path):
+    """A morph from given pairs crosses every seam whole: its matching is a Matching of
+    method "given", and the result saves, renders as HTML, plots and tracks."""
+    from modalmorph.apps.report import write_html
+    from modalmorph.figures import save_figures
+    from modalmorph.io import save_result
+
+    a = np.linspace(0.0, 2.0 * np.pi, 40, endpoint=False)
+    circle, ellipse = np.c_[np.cos(a), np.sin(a)], np.c_[1.6 * np.cos(a), np.sin(a)]
+    r = morph(circle, ellipse, matching=np.c_[0:40, 0:40][::-1])
+    assert isinstance(r.matching, Matching) and r.matching.method == "given"
+    assert_array_equal(r.matching.pairs, np.c_[0:40, 0:40])  # sorted by source node
+    assert r.converged and r.stop_reason == "tolerance" and r.distance <= r.tolerance
+    save_result(r, tmp_path / "out")
+    assert json.loads((tmp_path / "out" / "result.json").read_text())["matches"] == 40
+    assert "<html" in write_html(r, tmp_path / "r.html").read_text()[:400].lower()
+    assert {p.name for p in save_figures(r, tmp_path / "fig", formats=("png",))} >= {
+        "matches.png", "energy.png"}
+    tr = track([circle, ellipse, 1.1 * ellipse])
+    assert all(m.matching.method == "given" for m in tr.morphs)  # nearest pairs
+    write_html(tr, tmp_path / "t.html")
+
+
+def test_given_pairs_must_belong_to_the_objects():
+    a = np.linspace(0.0, 2.0 * np.pi, 20, endpoint=False)
+    circle = np.c_[np.cos(a), np.sin(a)]
+    with pytest.raises(ShapeError, match="out of range for 20 source and 20 target"):
+        morph(circle, circle, matching=np.c_[0:21, 0:21])
+    with pytest.raises(ShapeError, match="found for 10 source and 10 target nodes"):
+        morph(circle, circle, matching=match(circle[:10], circle[:10]))
+
+
+def test_results_print_in_a_few_lines():
+    a = np.linspace(0.0, 2.0 * np.pi, 30, endpoint=False)
+    circle = np.c_[np.cos(a), np.sin(a)]
+    r = morph(circle, 1.2 * circle, remove_rigid=True)
+    tr = track([circle, 1.1 * circle])
+    for obj in (r, r.matching, r.similarity, r.source, r.resolved, tr,
+                FEModel(circle).modes()):
+        text = repr(obj)
+        assert len(text.splitlines()) <= 10 and len(text) <= 800, text
+        assert "array(" not in text  # no array dumped

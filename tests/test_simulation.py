@@ -34,9 +34,10 @@ def test_stages_one_at_a_time():
     assert sim.stop_test() == "max_steps" and sim.reason == "max_steps"
     result = sim.result()
     assert result.steps == 2 and not result.converged
-    assert result.stop_reason.startswith("stopped at max_steps=2")
+    assert result.stop_reason == "max_steps"
+    assert result.message.startswith("stopped at max_steps=2")
     with pytest.raises(dataclasses.FrozenInstanceError):
-        result.converged = True
+        result.distance = 0.0
 
 
 def test_stop_test_tolerance():

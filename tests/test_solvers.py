@@ -88,7 +88,7 @@ def test_morph_through_solver(solver):
     source = np.c_[np.cos(t), np.sin(t)]
     target = np.c_[1.3 * np.cos(t), 0.8 * np.sin(t) + 0.1 * np.cos(2 * t)]
     result = modalmorph.morph(source, target, solver=solver)
-    assert result.params["solver"] == solver
+    assert result.resolved.solver == solver
     assert result.converged
     assert result.mean_distance[-1] < 0.1 * result.mean_distance[0]
 

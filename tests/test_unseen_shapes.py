@@ -39,7 +39,7 @@ def _check(source, target, *, rot_max=None, simple=True, **kw):
     """Match and morph with defaults; the invariants every valid pair must meet."""
     matching = mm.match(source, target)
     r = mm.morph(source, target, matching=matching, **kw)
-    assert r.converged and r.steps <= 100, r.stop_reason
+    assert r.converged and r.steps <= 100, r.message
     if simple:  # the ends are simple: so is every intermediate shape
         assert all(self_crossings(s) == 0 for s in r.shapes[1:])
     d_ab, d_ba = curve_distances(r.shapes[-1], target)
@@ -121,7 +121,7 @@ def test_any_size_ratio(factor):
     a = load_heart("diastole")
     b = (a - a.mean(0)) * factor + a.mean(0)
     r = _check(a, b, simple=factor > 1e-2)
-    assert r.params["free_motion"] == "similarity"
+    assert r.options.free_motion == "similarity"
     pairs = np.c_[np.arange(len(a)), np.arange(len(a))]
     free = mm.morph(a, b, matching=pairs)
     paper = mm.morph(a, b, matching=pairs, free_motion="none", max_steps=free.steps)
@@ -155,7 +155,7 @@ def test_sigma_story():
     """None chooses per shape; a number is used or refused with a true message."""
     circle = _circle(100)
     model = mm.FEModel(circle)
-    assert model.sigma_rel == 1.0  # the nominal width is fine for the physical model
+    assert model.sigma == 1.0  # the nominal width is fine for the physical model
     assert mm.match(circle, _circle(100, 1.2, 0.9)).sigma is None
     with pytest.raises(ValueError, match=r"sigma=3 .* largest sigma .* about 1\.[0-9]"):
         mm.FEModel(circle, sigma=3.0).modes()

@@ -32,10 +32,11 @@ from .core.material import MATERIALS, POLYETHYLENE, Material
 from .core.solvers import SOLVERS
 from .errors import OptionError
 
-__all__ = ["MatchOptions", "MorphOptions", "ReadOptions", "OutputOptions", "AlignOptions",
+__all__ = ["MatchOptions", "MorphOptions", "ReadOptions", "OutputOptions",
            "TrackOptions", "OPTION_CLASSES", "REFERENCES", "CORRESPONDENCES",
-           "flat_fields", "split", "parse_value", "METHODS", "ROTATIONS", "FREE_MOTIONS",
-           "LOADS", "SCHEMES", "OBJECTS", "FRAME_SPACINGS", "K_RANGE", "DT_RANGE", "C_MAX"]
+           "flat_fields", "parameters", "split", "parse_value", "METHODS", "ROTATIONS",
+           "FREE_MOTIONS", "LOADS", "SCHEMES", "OBJECTS", "FRAME_SPACINGS", "K_RANGE",
+           "DT_RANGE", "C_MAX"]
 
 METHODS = ("auto", "local", "global")
 ROTATIONS = ("auto", "free", "none")
@@ -139,6 +140,9 @@ class MorphOptions(_Options):
     of :mod:`modalmorph.pipeline` (and docs/method.md §4, §5) why the defaults are what
     they are, with the measurements."""
 
+    remove_rigid: bool = _opt(
+        False, "remove rotation, translation and scale first (Horn): morph only the "
+        "non-rigid part, in fewer steps", group="alignment", kind="bool")
     # physics
     material: Material = _opt(
         POLYETHYLENE, "material filling the objects: polyethylene (the paper's), rubber, "
@@ -227,6 +231,8 @@ class MorphOptions(_Options):
         super().__post_init__()
 
     def _check(self):
+        if not isinstance(self.remove_rigid, bool):
+            raise OptionError(f"remove_rigid must be true or false, got {self.remove_rigid!r}")
         if not isinstance(self.material, Material):
             raise OptionError(f"material must be a Material or one of "
                               f"{', '.join(MATERIALS)}, got {self.material!r}")
@@ -300,19 +306,6 @@ class OutputOptions(_Options):
 
 
 @dataclass(frozen=True)
-class AlignOptions(_Options):
-    """Whether :func:`modalmorph.morph` removes the rigid part first (method.md §3)."""
-
-    remove_rigid: bool = _opt(
-        False, "remove rotation, translation and scale first (Horn): morph only the "
-        "non-rigid part, in fewer steps", group="alignment", kind="bool")
-
-    def _check(self):
-        if not isinstance(self.remove_rigid, bool):
-            raise OptionError(f"remove_rigid must be true or false, got {self.remove_rigid!r}")
-
-
-@dataclass(frozen=True)
 class TrackOptions(_Options):
     """How :func:`modalmorph.track` follows a sequence."""
 
@@ -352,6 +345,20 @@ def flat_fields(classes=OPTION_CLASSES):
     names = {f.name for cls in classes if cls is not MatchOptions for f in fields(cls)}
     return [((f"match_{f.name}" if cls is MatchOptions and f.name in names else f.name),
              cls, f) for cls in classes for f in fields(cls)]
+
+
+def parameters(morph) -> dict:
+    """What a morph used, by flat name (``result.json``'s ``parameters``): its
+    :meth:`MorphOptions.record` with the values resolved for its object (``sigma``,
+    ``modes`` as a count, ``model_nodes`` as the model's node count, ``solver``) and the
+    matcher's options when known."""
+    flat = {f.name: name for name, cls, f in flat_fields() if cls is MatchOptions}
+    from_match = {} if morph.match_options is None else {
+        flat[name]: value for name, value in morph.match_options.record().items()}
+    resolved = morph.resolved
+    return {**morph.options.record(),
+            "sigma": resolved.sigma, "modes": resolved.modes,
+            "model_nodes": resolved.model_nodes, "solver": resolved.solver, **from_match}
 
 
 def split(values: dict, classes=OPTION_CLASSES, *, where: str = "options") -> dict:

@@ -89,14 +89,14 @@ unmatched, neighbours
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import fields
+from dataclasses import dataclass, fields
 
-from .core.align import align
-from .core.shape import as_shape
+from .core.align import Similarity, align
+from .core.shape import Shape, as_shape
 from .errors import MorphDivergedError, OptionError, ShapeError
-from .matching import match
+from .matching import Matching, match
 from .options import MatchOptions, MorphOptions, flat_fields
-from .simulation import SPARSE_MODES, Morph, Simulation, check_pairs
+from .simulation import SPARSE_MODES, Run, Simulation
 
 __all__ = ["Morph", "MorphDivergedError", "morph", "SPARSE_MODES"]
 
@@ -106,8 +106,36 @@ _MATCH_NAMES = {flat: f.name for flat, cls, f in flat_fields() if cls is MatchOp
 _MORPH_NAMES = {f.name for f in fields(MorphOptions)}
 
 
-def morph(source, target, *, matching=None, remove_rigid: bool = False,
-          options: MorphOptions | None = None,
+@dataclass(frozen=True, eq=False, repr=False)
+class Morph(Run):
+    """The intermediate shapes between two objects, their strain energy, and how they were
+    found: every attribute of :class:`~modalmorph.simulation.Run` (``shapes``, ``loads``,
+    ``energy``, ``node_energy``, ``mean_distance``, ``distance``, ``tolerance``,
+    ``stop_reason``, ``message``, ``resolved``, ``converged``, ``steps``) and:
+
+    Attributes
+    ----------
+    matching : Matching
+        The correspondences used (given pairs are a Matching of method ``"given"``).
+    similarity : Similarity or None
+        The similarity removed before morphing (``remove_rigid``), else None.
+    source, target : Shape
+        The objects as given (the source before any rigid alignment).
+    options : MorphOptions
+        The options of the physical model and the time integration.
+    match_options : MatchOptions or None
+        The matcher's options (None for given pairs).
+    """
+
+    matching: Matching
+    similarity: Similarity | None
+    source: Shape
+    target: Shape
+    options: MorphOptions
+    match_options: MatchOptions | None = None
+
+
+def morph(source, target, *, matching=None, options: MorphOptions | None = None,
           progress: Callable[[int, float], None] | None = None, **overrides) -> Morph:
     """Estimate the intermediate shapes that take ``source`` into ``target``.
 
@@ -116,15 +144,14 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
     source, target : Shape or array_like, shape (m, d) and (n, d)
         The objects at times t and t+1, both 2D or both 3D.
     matching : Matching, array_like of int (K, 2), MatchOptions or None, optional
-        Correspondences (source index, target index), or the options to compute them
-        with :func:`modalmorph.match` (None: its defaults).
-    remove_rigid : bool, optional
-        Align the source onto the target first with Horn's similarity (rotation,
-        translation, scale) from the matched pairs (section 5.2); the morph then holds
-        only the non-rigid part and usually needs far fewer steps.
+        Correspondences: a Matching of these two objects, given ``(source index, target
+        index)`` pairs (recorded as a Matching of method ``"given"``), or the options to
+        compute them with :func:`modalmorph.match` (None: its defaults).
     options : MorphOptions, optional
-        The physical model, loads, time integration and stop test (the module's docstring
-        says why the defaults are what they are).
+        The rigid alignment first (``remove_rigid``: Horn's similarity from the matched
+        pairs, section 5.2; the morph then holds only the non-rigid part), the physical
+        model, loads, time integration and stop test (the module's docstring says why the
+        defaults are what they are).
     progress : callable, optional
         Called after every step as ``progress(step, mean_distance)`` (user units).
     **overrides
@@ -141,8 +168,9 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
     ------
     OptionError
         For an unknown or invalid option (a ValueError).
-    ValueError
-        For invalid inputs, or when no node is matched.
+    ShapeError
+        For invalid objects, pairs that do not belong to them, or no matched node (a
+        ValueError).
     MorphDivergedError
         When the integration diverges (typically the explicit scheme with too large a k).
     """
@@ -154,16 +182,18 @@ def morph(source, target, *, matching=None, remove_rigid: bool = False,
     options, match_options = _options(options, matching, overrides)
     if matching is None or isinstance(matching, MatchOptions):
         matching = match(src, tgt, options=match_options)
+    elif isinstance(matching, Matching):
+        matching, match_options = matching.check(src.m, tgt.m), matching.options
     else:
-        match_options = getattr(matching, "options", None)
-    pairs = check_pairs(matching, src.m, tgt.m)
+        matching, match_options = Matching.given(matching, src.m, tgt.m), None
+    pairs = matching.pairs
     similarity, work = None, src
-    if remove_rigid:  # section 5.2: Horn's similarity from the matched pairs
+    if options.remove_rigid:  # section 5.2: Horn's similarity from the matched pairs
         similarity = align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]], scale=True)
         work = src.with_points(similarity.apply(src.points))
-    simulation = Simulation(work, tgt, pairs, options).run(progress)
-    return simulation.result(matching=matching, similarity=similarity, source=src,
-                             match_options=match_options)
+    run = Simulation(work, tgt, pairs, options).run(progress).result()
+    return Morph(**vars(run), matching=matching, similarity=similarity, source=src,
+                 target=tgt, options=options, match_options=match_options)
 
 
 def _options(options, matching, overrides: dict) -> tuple[MorphOptions, MatchOptions]:

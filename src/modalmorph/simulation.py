@@ -5,7 +5,7 @@ model and its modes, the reference scales, the modal stiffness (with the similar
 motions free), the springs, the damping, the Newmark integrator and the load targets, and
 records step 0; :meth:`Simulation.step` advances one time step, :meth:`Simulation.stop_test`
 says whether to stop and why, :meth:`Simulation.run` alternates the two, and
-:meth:`Simulation.result` gives the frozen :class:`Morph`. :func:`modalmorph.morph` is
+:meth:`Simulation.result` gives the frozen :class:`Run`. :func:`modalmorph.morph` is
 matching, optional alignment and this.
 """
 
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import linalg
@@ -25,11 +25,11 @@ from .core.energy import node_energy
 from .core.model import FEModel
 from .core.modes import rayleigh
 from .core.quality import Polyline
-from .core.shape import Shape, as_shape, coarsen, resample
+from .core.shape import Shape, as_shape, check_pairs, coarsen, resample
 from .errors import MorphDivergedError, OptionError
-from .options import MatchOptions, MorphOptions, flat_fields
+from .options import MorphOptions
 
-__all__ = ["Simulation", "Morph", "check_pairs", "SPARSE_MODES"]
+__all__ = ["Resolved", "Run", "STOP_REASONS", "Simulation", "SPARSE_MODES"]
 
 log = logging.getLogger(__name__)
 
@@ -51,8 +51,6 @@ _STALL_GAIN = 1e-3
 # Diverged when the matched nodes are further from their partners than this many times
 # their distance at the start (or than this many model sizes).
 _DIVERGED = 10
-# The flat names (config file, flags, result.json) of the matcher's options.
-_MATCH_FLAT = {f.name: flat for flat, cls, f in flat_fields() if cls is MatchOptions}
 # Similarity fields whose modal image is below this fraction of the largest are dependent.
 _RANK_TOL = 1e-10
 # Point sets: each point's distance to a cloud's surface is taken to the plane of its
@@ -65,9 +63,35 @@ _PLANE = 8
 _LAZY_SPACINGS = 4
 
 
-@dataclass(frozen=True, eq=False)
-class Morph:
-    """The intermediate shapes between two objects and their strain energy.
+STOP_REASONS = ("tolerance", "equilibrium", "max_steps")  # Run.stop_reason, in that order
+
+
+@dataclass(frozen=True)
+class Resolved:
+    """The values a morph resolved from its options for its objects.
+
+    Attributes
+    ----------
+    sigma : float
+        Gaussian width of the physical model, in units of its mean node spacing.
+    modes : int
+        Number of modes superposed (the Rayleigh-Ritz additions included).
+    model_nodes : int
+        Nodes of the physical model (fewer than the source's for a reduced model).
+    solver : str
+        The eigensolver used (``"dense"``, ``"sparse"`` or ``"multilevel"``).
+    """
+
+    sigma: float
+    modes: int
+    model_nodes: int
+    solver: str
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class Run:
+    """What one :class:`Simulation` computed: the shapes in time, their loads, strain
+    energies and distances, and why it stopped.
 
     Attributes
     ----------
@@ -104,28 +128,20 @@ class Morph:
         from converging; measured once the pulled pairs are within the tolerance plus 4
         target spacings. Other point sets (2D, or of at most 8 points): the mean distance
         of the nodes pulled to partners.
-    matching : Matching or ndarray
-        The correspondences used.
-    similarity : Similarity or None
-        The similarity removed before morphing (``remove_rigid``), else None.
-    converged : bool
-        Whether ``distance`` reached the tolerance.
+    tolerance : float
+        The stop test's tolerance, in the user's units (``tol`` times the target's RMS
+        radius, or ``tol_distance``).
     stop_reason : str
-        One sentence: converged, stopped at equilibrium (loads and elastic forces balance
-        short of the tolerance) or at ``max_steps``, with the final distance.
-    source, target : Shape
-        The objects as given (the source before any rigid alignment).
-    options : MorphOptions
-        The options of the physical model and the time integration.
-    match_options : MatchOptions or None
-        The matcher's options (those of the given Matching, when it records them; None for
-        given pairs).
-    params : dict
-        Every option, for reports and ``result.json``, under the flat names of the config
-        file (:func:`modalmorph.options.flat_fields`): :meth:`MorphOptions.record` with
-        the values resolved for this object (``sigma``, ``modes`` as a count,
-        ``model_nodes`` as the model's node count, ``solver``), ``remove_rigid``, and the
-        matcher's options when known.
+        Why the integration stopped, one of :data:`STOP_REASONS`: ``"tolerance"`` (the
+        distance reached the tolerance), ``"equilibrium"`` (loads and elastic forces
+        balance short of it) or ``"max_steps"``. A diverging integration raises
+        :class:`~modalmorph.errors.MorphDivergedError` instead.
+    message : str
+        The same in one sentence, with the final distance and the tolerance in the
+        target's unit.
+    resolved : Resolved
+        The values resolved from the options for this object (sigma, modes, model nodes,
+        solver).
     """
 
     shapes: np.ndarray
@@ -133,21 +149,25 @@ class Morph:
     energy: np.ndarray
     node_energy: np.ndarray
     mean_distance: np.ndarray
-    matching: object
-    similarity: object
-    converged: bool
+    distance: float
+    tolerance: float
     stop_reason: str
-    source: Shape
-    target: Shape
-    options: MorphOptions
-    params: dict = field(default_factory=dict)
-    distance: float | None = None
-    match_options: MatchOptions | None = None
+    message: str
+    resolved: Resolved
+
+    @property
+    def converged(self) -> bool:
+        """Whether the distance reached the tolerance."""
+        return self.stop_reason == "tolerance"
 
     @property
     def steps(self) -> int:
         """Number of time steps taken, T."""
         return self.shapes.shape[0] - 1
+
+    def __repr__(self) -> str:
+        m, d = self.shapes.shape[1:]
+        return f"{type(self).__name__}({m} nodes in {d}D: {self.message})"
 
 
 class Simulation:
@@ -217,7 +237,7 @@ class Simulation:
         self._MPhi = model.mass_times_modes(md)  # M Phi = (I kron A) M_g psi (method.md §1)
         # Reference scales: the stiffness and mass of one node in the Gaussian basis.
         d = work.dim
-        self.k_ref, V = self_entries(model.sigma, d, *model.lame)
+        self.k_ref, V = self_entries(model.width, d, *model.lame)
         m_ref = o.material.rho * V
         w_ref = np.sqrt(self.k_ref / m_ref)
         # one spring per node; with a reduced model their total stiffness is kept the same
@@ -390,11 +410,8 @@ class Simulation:
 
     # ----------------------------------------------------------------------- result
 
-    def result(self, *, matching=None, similarity=None, source: Shape | None = None,
-               match_options: MatchOptions | None = None) -> Morph:
-        """The frozen :class:`Morph` of a stopped simulation. ``matching`` (default: the
-        pairs), ``similarity``, ``source`` (default: the simulated one) and
-        ``match_options`` are recorded as given (see :func:`modalmorph.morph`)."""
+    def result(self) -> Run:
+        """The frozen :class:`Run` of a stopped simulation."""
         if self.reason is None:
             raise RuntimeError("the simulation has not stopped: call run(), or step() until "
                                "stop_test() gives a reason")
@@ -403,18 +420,17 @@ class Simulation:
         if (self._two_way or self._surface) and not converged:  # both ways at the end
             dist = self._distance(self._near[-1], lazy=False)
         frame = self.target.frame
-        stop = _stop_sentence(self.reason, self.steps, dist * size, self._tol_n * size,
-                              "input units" if frame is None else frame.unit)
+        message = _stop_sentence(self.reason, self.steps, dist * size, self._tol_n * size,
+                                 "input units" if frame is None else frame.unit)
         if not converged:
-            log.info("morph stopped without reaching the tolerance: %s", stop)
-        return Morph(shapes=np.array(self._shapes), loads=np.array(self._forces),
-                     energy=np.array(self._energy), node_energy=np.array(self._e_node),
-                     mean_distance=np.array(self._mean_dist) * size,
-                     matching=self.pairs if matching is None else matching,
-                     similarity=similarity, converged=converged, stop_reason=stop,
-                     source=self.source if source is None else source, target=self.target,
-                     options=self.options, params=self._params(similarity, match_options),
-                     distance=dist * size, match_options=match_options)
+            log.info("morph stopped without reaching the tolerance: %s", message)
+        resolved = Resolved(sigma=self.model.sigma, modes=self.n_modes,
+                            model_nodes=self.model.m, solver=self.model.solver)
+        return Run(shapes=np.array(self._shapes), loads=np.array(self._forces),
+                   energy=np.array(self._energy), node_energy=np.array(self._e_node),
+                   mean_distance=np.array(self._mean_dist) * size, distance=dist * size,
+                   tolerance=self._tol_n * size, stop_reason=self.reason, message=message,
+                   resolved=resolved)
 
     # ---------------------------------------------------------------------- helpers
 
@@ -425,7 +441,7 @@ class Simulation:
         return self._k_abs * self._Phi.tdot(u)
 
     def _distance(self, near: float, lazy: bool = True) -> float:
-        """The stop test's measure (normalised units, :attr:`Morph.distance`). With
+        """The stop test's measure (normalised units, :attr:`Run.distance`). With
         ``lazy``, a contour's curves are measured only once ``near`` (a lower bound) is
         within the tolerance, a point set's surfaces once it is within ``_gate``."""
         if self._surface:
@@ -455,31 +471,6 @@ class Simulation:
         self._mean_dist.append(_mean_distance(current, self._Y, self.pairs))
         self._near.append(_mean_distance(current, self._Y, self._pulled))
 
-    def _params(self, similarity, match_options: MatchOptions | None) -> dict:
-        """Every option under its flat name, the model's resolved values included."""
-        from_match = {} if match_options is None else {
-            _MATCH_FLAT[name]: value for name, value in match_options.record().items()}
-        return {"remove_rigid": similarity is not None, **self.options.record(),
-                "sigma": self.model.sigma_rel, "modes": self.n_modes,
-                "model_nodes": self.model.m, "solver": self.model.solver, **from_match}
-
-
-def check_pairs(matching, m: int, n: int) -> np.ndarray:
-    """The pairs (K, 2) of a Matching or an integer array, checked against ``m`` source
-    and ``n`` target nodes (at least one pair, each source node at most once)."""
-    pairs = np.asarray(getattr(matching, "pairs", matching))
-    if pairs.ndim != 2 or pairs.shape[1] != 2 or not np.issubdtype(pairs.dtype, np.integer):
-        raise ValueError(f"matching must be a Matching or an integer array of shape (K, 2), "
-                         f"got {pairs.dtype} {pairs.shape}")
-    if len(pairs) == 0:
-        raise ValueError("no node is matched: morph needs at least one matched pair")
-    if pairs[:, 0].min() < 0 or pairs[:, 0].max() >= m or pairs[:, 1].min() < 0 \
-            or pairs[:, 1].max() >= n:
-        raise ValueError(f"matching indices out of range for {m} source and {n} target nodes")
-    if len(np.unique(pairs[:, 0])) != len(pairs):
-        raise ValueError("matching pairs a source node more than once")
-    return pairs.astype(np.intp)
-
 
 def _flat(P: np.ndarray) -> np.ndarray:
     """(m, d) -> component-major (d*m,) (7)."""
@@ -492,7 +483,7 @@ def _nodes(u: np.ndarray, d: int) -> np.ndarray:
 
 
 def _stop_sentence(reason: str, steps: int, final: float, tol: float, unit: str) -> str:
-    """``stop_reason``: one short sentence with the distance (:attr:`Morph.distance`)
+    """:attr:`Run.message`: one short sentence with the distance (:attr:`Run.distance`)
     and its tolerance, in the target's unit."""
     where = f"{final:.3g} {unit} from the target (tolerance {tol:.3g} {unit})"
     if reason == "tolerance":

@@ -23,7 +23,14 @@ from .core.quality import curve_distances, self_crossings
 from .core.shape import Shape, as_shape
 from .errors import MorphDivergedError, OptionError, ShapeError
 from .matching import match
-from .options import CORRESPONDENCES, REFERENCES, MatchOptions, MorphOptions, TrackOptions
+from .options import (
+    CORRESPONDENCES,
+    REFERENCES,
+    MatchOptions,
+    MorphOptions,
+    TrackOptions,
+    parameters,
+)
 from .pipeline import Morph, morph
 
 __all__ = ["REFERENCES", "CORRESPONDENCES", "Track", "TrackOptions", "track",
@@ -33,7 +40,7 @@ log = logging.getLogger(__name__)
 
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class Track:
     """The nodes of frame 0 followed through every frame, with energy and strain.
 
@@ -104,6 +111,12 @@ class Track:
     closure_error: float | None
     params: dict = field(default_factory=dict)
 
+    def __repr__(self) -> str:
+        n_frames, m, d = self.points.shape
+        return (f"Track({n_frames} frames of {m} nodes in {d}D, total energy "
+                f"{float(self.energy.sum()):.4g}, strain {float(self.strain[-1]):+.3%} at "
+                f"the last frame)")
+
     @property
     def n_frames(self) -> int:
         """Number of frames, F."""
@@ -116,7 +129,7 @@ class Track:
 
 def track(frames, *, options: TrackOptions | None = None,
           names: Sequence[str] | None = None, match_options: MatchOptions | dict | None = None,
-          morph_options: MorphOptions | dict | None = None, remove_rigid: bool = False,
+          morph_options: MorphOptions | dict | None = None,
           progress: Callable[[int, int], None] | None = None, **overrides) -> Track:
     """Follow the nodes of frame 0 through a sequence of observed objects.
 
@@ -135,9 +148,8 @@ def track(frames, *, options: TrackOptions | None = None,
         A name per frame for messages (default ``"frame <i>"``).
     match_options, morph_options : MatchOptions, MorphOptions or dict, optional
         The matcher's (``correspondence="modal"`` only) and the morph's options; dicts of
-        their fields are converted (``morph_options`` may also hold ``remove_rigid``).
-    remove_rigid : bool, optional
-        Remove the similarity between consecutive frames first (:func:`modalmorph.morph`).
+        their fields are converted (``remove_rigid=True`` in the morph's options removes
+        the similarity between consecutive frames first).
     progress : callable, optional
         Called after each frame as ``progress(frame, n_frames)``.
     **overrides
@@ -154,8 +166,7 @@ def track(frames, *, options: TrackOptions | None = None,
     """
     opts = _track_options(options, overrides)
     match_opts = _match_options(match_options, opts.correspondence)
-    options_, dict_rigid = _morph_options(morph_options)
-    morph_opts = options_, remove_rigid or dict_rigid
+    morph_opts = _morph_options(morph_options)
     shapes, names = _frames(frames, names, opts.start_node)
     step = partial(_morph_frame, names=names, match_options=match_opts,
                    morph_options=morph_opts)
@@ -166,7 +177,7 @@ def track(frames, *, options: TrackOptions | None = None,
     params = dict(asdict(opts), segments=opts.segments if first.ordered else 0,
                   start_node=int(opts.start_node),
                   match_options={} if match_opts is None else match_opts.record(),
-                  morph=morphs[0].params)
+                  morph=parameters(morphs[0]))
     return _result(shapes, names, points, morphs, closure, params)
 
 
@@ -192,15 +203,13 @@ def _follow(shapes, reference: str, step, progress) -> list:
 
 
 def _morph_frame(source: Shape, target: Shape, f: int, *, names: tuple,
-                 match_options: MatchOptions | None, morph_options: tuple) -> Morph:
+                 match_options: MatchOptions | None, morph_options: MorphOptions) -> Morph:
     """One frame's morph: pairs (nearest, or modal with ``match_options``), then
     :func:`modalmorph.morph`; errors name the frame."""
-    options, remove_rigid = morph_options
     try:
         pairs = (_nearest_pairs(source.normalized, target.normalized)
                  if match_options is None else match(source, target, options=match_options))
-        return morph(source, target, matching=pairs, remove_rigid=remove_rigid,
-                     options=options)
+        return morph(source, target, matching=pairs, options=morph_options)
     except (ValueError, MorphDivergedError) as exc:
         raise ValueError(f"frame {f} ({names[f]}): {exc}") from exc
 
@@ -222,19 +231,17 @@ def _match_options(value, correspondence: str) -> MatchOptions | None:
         raise OptionError(f"match_options: {exc}") from None
 
 
-def _morph_options(value) -> tuple[MorphOptions, bool]:
-    """The morph's options and ``remove_rigid`` (a dict may hold it)."""
+def _morph_options(value) -> MorphOptions:
+    """The morph's options, from a MorphOptions or a dict of its fields."""
     if value is None:
-        return MorphOptions(), False
+        return MorphOptions()
     if isinstance(value, MorphOptions):
-        return value, False
+        return value
     if not isinstance(value, dict):
         raise OptionError(f"morph_options must be a MorphOptions or a dict, "
                           f"got {type(value).__name__}")
-    kw = dict(value)
-    remove_rigid = bool(kw.pop("remove_rigid", False))
     try:
-        return MorphOptions().replace(**kw), remove_rigid
+        return MorphOptions().replace(**value)
     except OptionError as exc:
         raise OptionError(f"morph_options: {exc}") from None
 

@@ -176,7 +176,7 @@ class _Job:
         if name == "morph.json":
             (out / name).write_text(json.dumps(self.payload, allow_nan=False), "utf-8")
         elif name in ("result.json", "shapes.npz", "final_shape.csv"):
-            save_result(r, out, params=r.params,
+            save_result(r, out,
                         options=self.settings.record(FORM_CLASSES))
         elif name == "report.html":
             write_html(r, out / name, title=self.title, images=self.images)

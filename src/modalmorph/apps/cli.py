@@ -406,7 +406,7 @@ def _converged_code(morphs) -> int:
     """Exit code 3 with a warning (printed even with -q) when a morph fell short."""
     short = [m for m in morphs if not m.converged]
     for m in short:
-        _warn(f"the tolerance was not reached: {m.stop_reason} (results written)")
+        _warn(f"the tolerance was not reached: {m.message} (results written)")
     return EXIT_NOT_CONVERGED if short else EXIT_OK
 
 
@@ -415,7 +415,7 @@ def _report(result, written, seconds: float, *, quiet: bool) -> None:
     if quiet:
         return
     print(f"{result.source.m} -> {result.target.m} nodes, {len(result.matching.pairs)} "
-          f"matches; {result.stop_reason}; {seconds:.1f} s", file=sys.stderr)
+          f"matches; {result.message}; {seconds:.1f} s", file=sys.stderr)
     _list_files(written)
 
 

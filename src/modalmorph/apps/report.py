@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io import atomic_write
+from ..options import parameters
 from ..version import __version__
 
 __all__ = ["image_data", "image_size", "input_images", "render_page", "result_payload",
@@ -122,7 +123,8 @@ def result_payload(result, *, title: str | None = None, images: dict | None = No
         "shapes": _array(shapes),
         "node_energy": _array(result.node_energy),
         "energy": _array(result.energy),
-        "parameters": json.loads(json.dumps(result.params, default=_json_value)),
+        "parameters": json.loads(json.dumps(result.params if is_track else parameters(result),
+                                            default=_json_value)),
         "images": images or {},
     }
     if is_track:
@@ -135,8 +137,8 @@ def result_payload(result, *, title: str | None = None, images: dict | None = No
         first, last = result.source, result.target
         payload.update(
             mean_distance=_array(result.mean_distance), loads=_array(result.loads),
-            pairs=np.asarray(result.matching.pairs, dtype=int).reshape(-1, 2).tolist(),
-            converged=bool(result.converged), stop_reason=str(result.stop_reason))
+            pairs=result.matching.pairs.tolist(),
+            converged=bool(result.converged), stop_reason=result.message)
     frame = getattr(last, "frame", None)  # shapes from images (and SVG) are drawn y down
     payload.update(y_up=frame is None or not frame.y_down,
                    source=_points(first), target=_points(last),

@@ -32,7 +32,6 @@ from ..io import (
 )
 from ..matching import match
 from ..options import (
-    AlignOptions,
     MatchOptions,
     MorphOptions,
     OutputOptions,
@@ -57,12 +56,12 @@ ONE_THREAD_NODES = 1000
 
 
 # The option classes of each command, in the order of their flags and records.
-PAIR_CLASSES = (ReadOptions, MatchOptions, AlignOptions, MorphOptions, OutputOptions)
+PAIR_CLASSES = (ReadOptions, MatchOptions, MorphOptions, OutputOptions)
 SEQUENCE_CLASSES = (*PAIR_CLASSES, TrackOptions)
-BATCH_CLASSES = (ReadOptions, MatchOptions, AlignOptions, MorphOptions, TrackOptions)
-FORM_CLASSES = (MatchOptions, AlignOptions, MorphOptions)
+BATCH_CLASSES = (ReadOptions, MatchOptions, MorphOptions, TrackOptions)
+FORM_CLASSES = (MatchOptions, MorphOptions)
 _ATTRIBUTE = {ReadOptions: "read", MatchOptions: "match", MorphOptions: "morph",
-              AlignOptions: "align", OutputOptions: "output", TrackOptions: "sequence"}
+              OutputOptions: "output", TrackOptions: "sequence"}
 
 
 @dataclass(frozen=True)
@@ -72,7 +71,6 @@ class Settings:
     read: ReadOptions = field(default_factory=ReadOptions)
     match: MatchOptions = field(default_factory=MatchOptions)
     morph: MorphOptions = field(default_factory=MorphOptions)
-    align: AlignOptions = field(default_factory=AlignOptions)
     output: OutputOptions = field(default_factory=OutputOptions)
     sequence: TrackOptions = field(default_factory=TrackOptions)
 
@@ -185,8 +183,7 @@ def compute_morph(source, target, settings: Settings, *, progress=None):
     """:func:`modalmorph.match` then :func:`modalmorph.morph` with the settings."""
     with blas_threads(max(source.m, target.m)):
         matching = match(source, target, options=settings.match)
-        return morph(source, target, matching=matching,
-                     remove_rigid=settings.align.remove_rigid, options=settings.morph,
+        return morph(source, target, matching=matching, options=settings.morph,
                      progress=progress)
 
 
@@ -214,7 +211,7 @@ def write_morph(result, folder: Path, settings: Settings, *, inputs=(), images=N
     """Write a morph's results and the outputs of ``settings.output`` into ``folder``;
     returns the files' paths relative to it."""
     output = settings.output
-    save_result(result, folder, params=result.params, options=settings.record(PAIR_CLASSES),
+    save_result(result, folder, options=settings.record(PAIR_CLASSES),
                 inputs=list(inputs))
     if output.figures or output.gif or output.mp4:
         look = dict(frames=output.frames, background=output.background)
@@ -251,8 +248,7 @@ def track_files(inputs, out, settings: Settings | None = None, *, progress=None)
             result = track(frames.shapes, names=frames.names, options=seq,
                            match_options=settings.match
                            if seq.correspondence == "modal" else None,
-                           morph_options=settings.morph,
-                           remove_rigid=settings.align.remove_rigid, progress=progress)
+                           morph_options=settings.morph, progress=progress)
         save_track(result, tmp, options=settings.record(SEQUENCE_CLASSES),
                    input_files=input_records(inputs))
         _write_track_renderings(result, tmp, output)

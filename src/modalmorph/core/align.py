@@ -23,7 +23,7 @@ __all__ = ["Similarity", "align"]
 _COINCIDE = 1e-14
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class Similarity:
     """The map ``x -> scale * rotation @ x + translation``.
 
@@ -39,6 +39,13 @@ class Similarity:
     rotation: np.ndarray
     scale: float
     translation: np.ndarray
+
+    def __repr__(self) -> str:
+        d = len(self.translation)
+        turn = np.degrees(np.arctan2(self.rotation[1, 0], self.rotation[0, 0]))
+        angle = f", rotation {turn:.3g} deg" if d == 2 else ""
+        return (f"Similarity({d}D, scale {self.scale:.6g}{angle}, translation "
+                f"{np.array2string(np.asarray(self.translation), precision=4)})")
 
     @property
     def dim(self) -> int:

@@ -64,7 +64,7 @@ class FEModel:
         ``Gamma`` ill-conditioned for this node set, then the largest width that does not
         (:func:`~modalmorph.core.element.auto_sigma`). A given value is used as it is, and
         refused with a ``ModelError`` (naming the largest width that works) when the Gram
-        matrix is numerically singular. The width used is :attr:`sigma_rel`.
+        matrix is numerically singular. The width used is :attr:`sigma`.
     nominal_sigma : float, optional
         The width ``sigma=None`` starts from (default ``DEFAULT_SIGMA``; the matcher's
         models use 2).
@@ -121,11 +121,11 @@ class FEModel:
         self._solver = solvers.choose(solver, self.shape.dim, self.shape.m)
         self.cutoff = float(self._solver.cutoff if cutoff is None else cutoff)
         if sigma is None:
-            self.sigma_rel, log_cond = auto_sigma_condition(self.shape, nominal_sigma)
+            self.sigma, log_cond = auto_sigma_condition(self.shape, nominal_sigma)
             if log_cond is not None:  # measured on the way: no second eigensolve
                 self.__dict__["gamma_condition"] = 10.0**log_cond
         else:
-            self.sigma_rel = float(sigma)
+            self.sigma = float(sigma)
         self.material = material
         self.plane = plane
         if self.dim == 2:
@@ -163,9 +163,10 @@ class FEModel:
         return self.shape.normalized
 
     @cached_property
-    def sigma(self) -> float:
-        """Absolute Gaussian width in the normalised frame."""
-        return self.sigma_rel * self.shape.spacing
+    def width(self) -> float:
+        """The Gaussian width in the normalised frame: ``sigma`` times the mean node
+        spacing (the ``sigma`` of the closed forms of :mod:`modalmorph.core.element`)."""
+        return self.sigma * self.shape.spacing
 
     @cached_property
     def gamma_condition(self) -> float:
@@ -177,7 +178,7 @@ class FEModel:
     def cutoff_radius(self) -> float:
         """Sparse solver: pairs of nodes farther apart than this (normalised frame) do not
         interact. See :func:`cutoff_radius`."""
-        return cutoff_radius(self.sigma, self.cutoff)
+        return cutoff_radius(self.width, self.cutoff)
 
     def field(self, points: np.ndarray) -> sparse.csr_array:
         """``g_k(x_p)`` (2) at points ``x_p`` (normalised frame) for every node ``k``.
@@ -194,7 +195,7 @@ class FEModel:
         points = np.asarray(points, dtype=np.float64)
         dist = cKDTree(points).sparse_distance_matrix(cKDTree(self.points), self.cutoff_radius,
                                                       output_type="coo_matrix")
-        g = sparse.csr_array((gaussian(dist.data**2, self.sigma), (dist.row, dist.col)),
+        g = sparse.csr_array((gaussian(dist.data**2, self.width), (dist.row, dist.col)),
                              shape=(len(points), self.m))
         _check_reached(g.sum(axis=1) > 0)
         return g
@@ -206,7 +207,7 @@ class FEModel:
               - 2 * x @ self.points.T)
         inside = r2 <= self.cutoff_radius**2
         _check_reached(inside.any(axis=1))
-        return np.where(inside, gaussian(np.maximum(r2, 0.0), self.sigma), 0.0)
+        return np.where(inside, gaussian(np.maximum(r2, 0.0), self.width), 0.0)
 
     def modes_at(self, modes: Modes, points: np.ndarray) -> np.ndarray:
         """Mode shapes evaluated at arbitrary points (normalised frame), shape (d*p, n).
@@ -238,14 +239,14 @@ class FEModel:
     @cached_property
     def gram(self) -> tuple[np.ndarray, np.ndarray]:
         """Dense ``(G, Gamma)`` of the exact model, each (m, m)."""
-        return gram_entries(self._offsets, self.sigma)
+        return gram_entries(self._offsets, self.width)
 
     @cached_property
     def stiffness_gaussian(self) -> np.ndarray:
         """Dense stiffness in the Gaussian basis, ``K_g`` (dm, dm), component-major (7)."""
         self._check_dense("K_g")
         lam, mu = self.lame
-        blocks = stiffness_entries(self._offsets, self.sigma, lam, mu)  # (m, m, d, d)
+        blocks = stiffness_entries(self._offsets, self.width, lam, mu)  # (m, m, d, d)
         dm = self.dim * self.m
         return np.ascontiguousarray(blocks.transpose(2, 0, 3, 1).reshape(dm, dm))
 
@@ -262,8 +263,8 @@ class FEModel:
     def gram_sparse(self) -> tuple[sparse.csr_array, sparse.csr_array]:
         """Sparse ``(G, Gamma)``, each (m, m) CSR, truncated at :attr:`cutoff_radius`."""
         m, (i, j) = self.m, self.pairs.T
-        g, gamma = gram_entries(self.points[j] - self.points[i], self.sigma)
-        g0, gamma0 = gram_entries(np.zeros((1, self.dim)), self.sigma)
+        g, gamma = gram_entries(self.points[j] - self.points[i], self.width)
+        g0, gamma0 = gram_entries(np.zeros((1, self.dim)), self.width)
         diag = np.arange(m, dtype=i.dtype)
         rows, cols = np.r_[i, j, diag], np.r_[j, i, diag]
 
@@ -286,13 +287,13 @@ class FEModel:
         data = np.empty((d, d, nnz_block))
         rows = np.empty(nnz_block, dtype=itype)
         cols = np.empty(nnz_block, dtype=itype)
-        data[:, :, 2 * p:] = stiffness_entries(np.zeros((1, d)), self.sigma, lam, mu)[0][
+        data[:, :, 2 * p:] = stiffness_entries(np.zeros((1, d)), self.width, lam, mu)[0][
             :, :, None]
         rows[2 * p:] = cols[2 * p:] = np.arange(m, dtype=itype)
         chunk = 1 << 20
         for start in range(0, p, chunk):
             i, j = pairs[start:start + chunk].T
-            blocks = stiffness_entries(x[j] - x[i], self.sigma, lam, mu)  # (c, d, d)
+            blocks = stiffness_entries(x[j] - x[i], self.width, lam, mu)  # (c, d, d)
             stop = start + len(i)
             # K_g^ab_ij = K_g^ab_ji: the blocks are even in r and symmetric in (a, b)
             data[:, :, start:stop] = data[:, :, p + start:p + stop] = blocks.transpose(1, 2, 0)
@@ -311,7 +312,7 @@ class FEModel:
             try:
                 return spd_factor(self.gram_sparse[0])
             except RuntimeError:  # "Factor is exactly singular"
-                raise singular_gram(self.shape, self.sigma_rel) from None
+                raise singular_gram(self.shape, self.sigma) from None
         return self._dense_g_factor
 
     def solve_gram(self, B: np.ndarray) -> np.ndarray:
@@ -396,7 +397,7 @@ class FEModel:
         try:
             return linalg.cho_factor(self.gram[0], lower=True, check_finite=False)
         except linalg.LinAlgError:
-            raise singular_gram(self.shape, self.sigma_rel) from None
+            raise singular_gram(self.shape, self.sigma) from None
 
     def modes(self, n: int | None = None) -> Modes:
         """The lowest ``n`` modes (all when ``None``) of ``K Phi = M Phi Omega^2`` (6).
@@ -459,11 +460,11 @@ class FEModel:
     def coarsened(self, nodes: int) -> FEModel:
         """The same model (sigma, material, plane, cutoff; solver ``"auto"``) of at most
         ``nodes`` nodes spread evenly over the object (:func:`modalmorph.core.shape.coarsen`)."""
-        return FEModel(coarsen(self.shape, nodes), sigma=self.sigma_rel,
+        return FEModel(coarsen(self.shape, nodes), sigma=self.sigma,
                        material=self.material, plane=self.plane, cutoff=self.cutoff)
 
     def __repr__(self) -> str:
-        return (f"FEModel(m={self.m}, d={self.dim}, sigma={self.sigma_rel:g}, "
+        return (f"FEModel(m={self.m}, d={self.dim}, sigma={self.sigma:g}, "
                 f"material={self.material.name}, solver={self.solver!r})")
 
 

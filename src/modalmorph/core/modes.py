@@ -10,7 +10,7 @@ import numpy as np
 __all__ = ["Modes", "rayleigh"]
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class Modes:
     """Mass-normalised vibration modes of one model.
 
@@ -31,6 +31,11 @@ class Modes:
     shapes: np.ndarray
     gaussian: np.ndarray
     dim: int
+
+    def __repr__(self) -> str:
+        f = self.frequencies
+        return (f"Modes({len(f)} modes of {self.shapes.shape[0] // self.dim} nodes in "
+                f"{self.dim}D, frequencies {f.min():.4g} .. {f.max():.4g})")
 
     @property
     def n(self) -> int:

@@ -8,7 +8,10 @@ from functools import cached_property
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["ImageFrame", "Shape", "as_shape", "coarsen", "resample", "spread_indices"]
+from ..errors import ShapeError
+
+__all__ = ["ImageFrame", "Shape", "as_shape", "check_pairs", "coarsen", "resample",
+           "spread_indices"]
 
 # Two nodes closer than this fraction of the object's RMS radius are "the same node".
 _REPEAT_TOL = 1e-9
@@ -46,7 +49,7 @@ class ImageFrame:
     y_down: bool = True
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class Shape:
     """An object to be modelled: an ordered set of ``m`` nodes in 2D or 3D.
 
@@ -70,7 +73,7 @@ class Shape:
 
     Raises
     ------
-    ValueError
+    ShapeError
         If the points are not finite, not of shape (m, 2) or (m, 3), fewer than 3, contain
         repeated nodes, or all lie (nearly) at one point.
     """
@@ -91,15 +94,15 @@ class Shape:
             faces = np.asarray(self.faces)
             integer = np.issubdtype(faces.dtype, np.integer)
             if faces.ndim != 2 or faces.shape[1] != 3 or not integer:
-                raise ValueError(f"faces must be an integer array of shape (f, 3), got "
+                raise ShapeError(f"faces must be an integer array of shape (f, 3), got "
                                  f"{faces.dtype} {faces.shape}")
             if faces.size and (faces.min() < 0 or faces.max() >= len(pts)):
-                raise ValueError(f"faces index nodes outside 0..{len(pts) - 1}")
+                raise ShapeError(f"faces index nodes outside 0..{len(pts) - 1}")
             faces = faces.astype(np.intp)
             faces.setflags(write=False)
             object.__setattr__(self, "faces", faces)
         if self.frame is not None and not isinstance(self.frame, ImageFrame):
-            raise ValueError(f"frame must be an ImageFrame or None, got {self.frame!r}")
+            raise ShapeError(f"frame must be an ImageFrame or None, got {self.frame!r}")
 
     @property
     def m(self) -> int:
@@ -146,6 +149,12 @@ class Shape:
         """Map points in the user's coordinates into this shape's normalised frame."""
         return (np.asarray(points, dtype=np.float64) - self.centroid) / self.size
 
+    def __repr__(self) -> str:
+        kind = ("surface" if self.faces is not None else "closed contour" if self.ordered
+                and self.closed else "open curve" if self.ordered else "point set")
+        frame = "" if self.frame is None else f", in {self.frame.unit}"
+        return f"Shape({self.m} nodes, {self.dim}D {kind}{frame})"
+
     def with_points(self, points: np.ndarray) -> Shape:
         """The same topology (closed, ordered, faces) and frame on other node coordinates."""
         return Shape(points, closed=self.closed, ordered=self.ordered, faces=self.faces,
@@ -154,32 +163,32 @@ class Shape:
 
 def _validate_points(points, name: str) -> np.ndarray:
     if np.iscomplexobj(points):
-        raise ValueError(f"{name} must be real coordinates, got complex numbers")
+        raise ShapeError(f"{name} must be real coordinates, got complex numbers")
     try:
         pts = np.array(points, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be numeric coordinates: {exc}") from None
+        raise ShapeError(f"{name} must be numeric coordinates: {exc}") from None
     if pts.ndim != 2 or pts.shape[1] not in (2, 3):
-        raise ValueError(f"{name} must have shape (m, 2) or (m, 3), got {pts.shape}")
+        raise ShapeError(f"{name} must have shape (m, 2) or (m, 3), got {pts.shape}")
     if pts.shape[0] < 3:
-        raise ValueError(f"{name} must have at least 3 nodes, got {pts.shape[0]}")
+        raise ShapeError(f"{name} must have at least 3 nodes, got {pts.shape[0]}")
     bad = ~np.isfinite(pts).all(axis=1)
     if bad.any():
-        raise ValueError(f"{name} has non-finite coordinates (NaN or inf) at node(s) "
+        raise ShapeError(f"{name} has non-finite coordinates (NaN or inf) at node(s) "
                          f"{np.flatnonzero(bad)[:10].tolist()}")
     big = np.abs(pts).max(axis=1) > MAX_COORDINATE
     if big.any():
-        raise ValueError(f"{name} has coordinates beyond +-{MAX_COORDINATE:g} at node(s) "
+        raise ShapeError(f"{name} has coordinates beyond +-{MAX_COORDINATE:g} at node(s) "
                          f"{np.flatnonzero(big)[:10].tolist()}: too large to compute with")
     centred = pts - pts.mean(axis=0)
     size = np.sqrt(np.mean(np.sum(centred**2, axis=1)))
     magnitude = max(1.0, float(np.abs(pts).max()))
     if size <= _POINT_TOL * magnitude:
-        raise ValueError(f"{name}: all {pts.shape[0]} nodes lie (nearly) at one point")
+        raise ShapeError(f"{name}: all {pts.shape[0]} nodes lie (nearly) at one point")
     pairs = cKDTree(pts).query_pairs(_REPEAT_TOL * size, output_type="ndarray")
     if len(pairs):
         i, j = pairs[0]
-        raise ValueError(f"{name} has repeated nodes: node {i} and node {j} coincide "
+        raise ShapeError(f"{name} has repeated nodes: node {i} and node {j} coincide "
                          f"({len(pairs)} repeated pair(s) in all)")
     return pts
 
@@ -192,7 +201,7 @@ def as_shape(obj, name: str = "shape") -> Shape:
         return Shape(obj)
     except ValueError as exc:
         msg = str(exc)
-        raise ValueError(msg.replace("points", name, 1) if msg.startswith("points") else
+        raise ShapeError(msg.replace("points", name, 1) if msg.startswith("points") else
                          f"{name}: {msg}") from None
 
 
@@ -215,7 +224,7 @@ def resample(points, n: int, *, closed: bool = True) -> np.ndarray:
     """
     pts = np.asarray(points, dtype=np.float64)
     if n < 3:
-        raise ValueError(f"n must be >= 3, got {n}")
+        raise ShapeError(f"n must be >= 3, got {n}")
     path = np.vstack([pts, pts[:1]]) if closed else pts
     s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))]
     t = np.linspace(0.0, s[-1], n, endpoint=not closed)
@@ -255,3 +264,23 @@ def coarsen(shape: Shape, n: int) -> Shape:
     if shape.ordered:
         return Shape(resample(shape.points, n, closed=shape.closed), closed=shape.closed)
     return Shape(shape.points[spread_indices(shape, n)], ordered=False)
+
+
+def check_pairs(pairs, m: int, n: int) -> np.ndarray:
+    """Node pairs (K, 2) ``(source index, target index)`` as intp, checked against ``m``
+    source and ``n`` target nodes: integers, at least one pair, every index in range,
+    each source node at most once. Raises :class:`ShapeError` naming what is wrong."""
+    pairs = np.asarray(pairs)
+    if pairs.ndim != 2 or pairs.shape[1] != 2 or not (
+            pairs.size == 0 or np.issubdtype(pairs.dtype, np.integer)):
+        raise ShapeError(f"matching must be a Matching or an integer array of shape (K, 2), "
+                         f"got {pairs.dtype} {pairs.shape}")
+    if len(pairs) == 0:
+        raise ShapeError("no node is matched: morph needs at least one matched pair")
+    if pairs[:, 0].min() < 0 or pairs[:, 0].max() >= m or pairs[:, 1].min() < 0 \
+            or pairs[:, 1].max() >= n:
+        raise ShapeError(f"matching indices out of range for {m} source and {n} target "
+                         "nodes")
+    if len(np.unique(pairs[:, 0])) != len(pairs):
+        raise ShapeError("matching pairs a source node more than once")
+    return pairs.astype(np.intp)

@@ -11,7 +11,7 @@ A *morph* here is the result of :func:`modalmorph.morph` (or anything with the s
 fields): ``shapes`` (T+1, m, d) in the user's coordinates with step 0 the (aligned)
 source, ``loads`` (T+1, m, d), ``energy`` (T+1,), ``node_energy`` (T+1, m),
 ``mean_distance`` (T+1,), ``matching.pairs`` (K, 2), ``similarity``, ``source``,
-``target``, ``converged`` and ``stop_reason``.
+``target``, ``converged`` and ``message``.
 
 Shapes in image coordinates (a :class:`~modalmorph.core.shape.ImageFrame` on the target, as
 read from an image or SVG) are drawn with y pointing down, their axes in pixels, over
@@ -605,7 +605,7 @@ def plot_energy(morph, *, ax=None):
     Parameters
     ----------
     morph : Morph
-        A morph result: uses ``energy``, ``mean_distance`` and ``stop_reason``.
+        A morph result: uses ``energy``, ``mean_distance`` and ``message``.
     ax : matplotlib Axes, optional
         Where to draw the energy; the distance goes on ``ax.twinx()``.
 
@@ -638,7 +638,7 @@ def plot_energy(morph, *, ax=None):
     import textwrap
 
     status = "converged" if getattr(morph, "converged", False) else "not converged"
-    reason = textwrap.fill(getattr(morph, "stop_reason", "") or status, 70)
+    reason = textwrap.fill(getattr(morph, "message", "") or status, 70)
     _legend_above(ax, [e_line, d_line], [e_line.get_label(), d_line.get_label()],
                   title=reason, title_fontsize="small")
     return ax

@@ -81,7 +81,7 @@ import numpy as np
 
 from ..core.quality import area
 from ..core.shape import ImageFrame, Shape, resample
-from ..options import OBJECTS
+from ..options import OBJECTS, parameters
 from ..version import __version__
 from .vtk import write_vtk_series
 
@@ -891,7 +891,7 @@ def write_points(path, points) -> None:
             tmp.write_text(json.dumps(data) + "\n", encoding="utf-8")
 
 
-def save_result(morph, out_dir, *, params: dict, options: dict | None = None,
+def save_result(morph, out_dir, *, options: dict | None = None,
                 inputs: list | None = None) -> None:
     """Write a morph's result into ``out_dir`` (created if needed), one file at a time.
 
@@ -907,8 +907,6 @@ def save_result(morph, out_dir, *, params: dict, options: dict | None = None,
     ----------
     morph : Morph
     out_dir : str or os.PathLike
-    params : dict
-        The parameters the run used (``Morph.params``).
     options : dict, optional
         Every option of the run by flat name, as given (the command line's record).
     inputs : list of dict, optional
@@ -917,14 +915,14 @@ def save_result(morph, out_dir, *, params: dict, options: dict | None = None,
     Raises
     ------
     ValueError
-        If ``params`` or ``options`` hold a value that cannot be written as JSON.
+        If ``options`` hold a value that cannot be written as JSON.
     """
     out_dir = Path(out_dir)
-    summary = result_summary(morph, params=params, options=options, inputs=inputs)
+    summary = result_summary(morph, options=options, inputs=inputs)
     try:
         text = json.dumps(summary, indent=2, default=_json_default, allow_nan=False)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"params cannot be written as JSON: {exc}") from None
+        raise ValueError(f"options cannot be written as JSON: {exc}") from None
     out_dir.mkdir(parents=True, exist_ok=True)
     with atomic_write(out_dir / "result.json") as tmp:
         tmp.write_text(text + "\n", encoding="utf-8")
@@ -939,17 +937,19 @@ def save_result(morph, out_dir, *, params: dict, options: dict | None = None,
     write_points(out_dir / "final_shape.csv", shapes[-1])
 
 
-def result_summary(morph, *, params: dict, options: dict | None = None,
-                   inputs: list | None = None) -> dict:
+def result_summary(morph, *, options: dict | None = None, inputs: list | None = None) -> dict:
     """The content of ``result.json``::
 
         {
           "modalmorph_version": str,      # the library that wrote it
           "inputs": [{"path", "sha256"}], # the input files (empty when not given)
           "options": {...},               # every option as given, by flat name
-          "parameters": {...},            # what the run used (Morph.params)
-          "converged": bool,              # the stopping criterion was met
-          "stop_reason": str,             # why the integration stopped
+          "parameters": {...},            # what the run used (options.parameters)
+          "converged": bool,              # the distance reached the tolerance
+          "stop_reason": str,             # tolerance, equilibrium or max_steps
+          "message": str,                 # the same in one sentence, with units
+          "distance": float,              # the stop test's measure at the end
+          "tolerance": float,             # its tolerance (input units)
           "steps": int,                   # T, the number of time steps taken
           "matches": int,                 # K, the number of matched node pairs
           "source_nodes": int,            # m
@@ -965,9 +965,12 @@ def result_summary(morph, *, params: dict, options: dict | None = None,
         "modalmorph_version": __version__,
         "inputs": list(inputs or []),
         "options": dict(options or {}),
-        "parameters": params,
+        "parameters": parameters(morph),
         "converged": bool(morph.converged),
-        "stop_reason": str(morph.stop_reason),
+        "stop_reason": morph.stop_reason,
+        "message": morph.message,
+        "distance": float(morph.distance),
+        "tolerance": float(morph.tolerance),
         "steps": int(morph.steps),
         "matches": len(_pairs_array(morph)),
         "source_nodes": int(morph.source.m),
@@ -979,7 +982,7 @@ def result_summary(morph, *, params: dict, options: dict | None = None,
 
 
 def _pairs_array(morph) -> np.ndarray:
-    return np.asarray(morph.matching.pairs, dtype=np.intp).reshape(-1, 2)
+    return morph.matching.pairs
 
 
 def _finite_or_none(values) -> list:
@@ -1146,7 +1149,7 @@ def atomic_output_dir(final_dir):
     Examples
     --------
     >>> with atomic_output_dir("results") as tmp:  # doctest: +SKIP
-    ...     save_result(morph, tmp, params=params)
+    ...     save_result(morph, tmp)
     """
     name = os.fspath(final_dir)
     final = Path(os.path.abspath(final_dir))

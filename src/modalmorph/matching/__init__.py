@@ -37,7 +37,7 @@ from scipy.spatial import cKDTree
 from ..core.align import Similarity, align
 from ..core.model import FEModel
 from ..core.quality import area
-from ..core.shape import Shape, as_shape, resample, spread_indices
+from ..core.shape import Shape, as_shape, check_pairs, resample, spread_indices
 from ..errors import OptionError, ShapeError
 from ..options import METHODS, ROTATIONS, MatchOptions
 from .clouds import refine
@@ -160,7 +160,7 @@ _STIFF = 1e-3
 _TANGENTIAL = 0.3
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class Matching:
     """Correspondences between the nodes of a source and a target object.
 
@@ -209,6 +209,32 @@ class Matching:
 
     def __len__(self) -> int:
         return self.pairs.shape[0]
+
+    def __repr__(self) -> str:
+        m, n = self.shape
+        how = self.method if not self.modes else f"{self.method}, {self.modes} modes"
+        turned = "" if self.similarity is None else ", with a similarity"
+        return f"Matching({len(self)} pairs of {m} -> {n} nodes, {how}{turned})"
+
+    @classmethod
+    def given(cls, pairs, m: int, n: int) -> Matching:
+        """Given ``(source index, target index)`` pairs (K, 2) of objects of ``m`` source
+        and ``n`` target nodes as a Matching of method ``"given"`` (sorted by source index,
+        zero costs); :class:`ShapeError` when they are not such pairs."""
+        pairs = check_pairs(pairs, m, n)
+        pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
+        return cls(pairs=pairs, cost=np.zeros(len(pairs)), method="given", modes=0,
+                   sigma=None, similarity=None, shape=(int(m), int(n)))
+
+    def check(self, m: int, n: int) -> Matching:
+        """This matching, if it belongs to objects of ``m`` source and ``n`` target nodes;
+        else :class:`ShapeError` naming both node counts."""
+        if tuple(self.shape) != (m, n):
+            raise ShapeError(f"the matching was found for {self.shape[0]} source and "
+                             f"{self.shape[1]} target nodes, not for the {m} and {n} "
+                             "given")
+        check_pairs(self.pairs, m, n)
+        return self
 
 
 # --------------------------------------------------------------------------- modal model

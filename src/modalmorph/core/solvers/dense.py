@@ -37,7 +37,7 @@ def solve(model, n: int) -> Modes:
     if info == 0:
         Linv, info = lapack.dtrtri(L, lower=1)
     if not cond < MAX_CONDITION or info != 0:
-        raise singular_gram(model.shape, model.sigma_rel, cond)
+        raise singular_gram(model.shape, model.sigma, cond)
     W = Linv.T  # W^T Gamma W = I
     w2, Y = _eigh_lowest(_whiten(model.stiffness_gaussian, Linv, d, m), n)
     psi = np.matmul(W, Y.reshape(d, m, n))  # (I kron W) Y

@@ -204,7 +204,7 @@ def _check_converged(model, res: np.ndarray, tol: float, its: int, maxiter: int)
     if np.all(res <= tol):
         return
     bad = int(np.argmax(res))
-    singular = (" " + str(singular_gram(model.shape, model.sigma_rel))
+    singular = (" " + str(singular_gram(model.shape, model.sigma))
                 if not np.all(np.isfinite(res)) else "")
     raise ModelError(
         f"the multilevel solver did not converge for this {model.m}-node shape: mode {bad} "
@@ -268,7 +268,7 @@ class Operators:
 
     def __init__(self, model, order: np.ndarray, pool: ThreadPoolExecutor, threads: int):
         self.d, self.m, self.pool = model.dim, model.m, pool
-        self.sigma = model.sigma
+        self.sigma = model.width
         d, m = self.d, self.m
         lam, mu = model.lame
         self.x = x = model.points[order]
@@ -400,7 +400,7 @@ def _patch_preconditioner(model, order: np.ndarray, pool: ThreadPoolExecutor,
 
     def inverse_factor(s: int) -> np.ndarray:
         y = x[s:s + P]
-        blocks = stiffness_entries(y[None, :, :] - y[:, None, :], model.sigma, lam, mu)
+        blocks = stiffness_entries(y[None, :, :] - y[:, None, :], model.width, lam, mu)
         A = blocks.transpose(2, 0, 3, 1).reshape(d * len(y), d * len(y))
         A[np.diag_indices_from(A)] *= 1 + 1e-8  # K_g is only semi-definite numerically
         L = linalg.cholesky(A, lower=True, check_finite=False)

@@ -43,7 +43,7 @@ def solve(model, n: int) -> Modes:
 
     cond = _condition_spd(Gamma)
     if not cond < MAX_CONDITION:
-        raise singular_gram(model.shape, model.sigma_rel, cond)
+        raise singular_gram(model.shape, model.sigma, cond)
 
     Mg = sparse.block_diag([Gamma] * d, format="csr")
     lu, shift = _shifted_factor(Kg, Mg, model)
@@ -60,7 +60,7 @@ def solve(model, n: int) -> Modes:
     residual = np.linalg.norm(KgPsi - MgPsi * w2, axis=0)
     k_norm = splinalg.norm(Kg, 1)
     if not np.all(residual <= SPARSE_RESIDUAL_TOL * k_norm * np.linalg.norm(psi, axis=0)):
-        raise singular_gram(model.shape, model.sigma_rel, detail=" (sparse eigensolver "
+        raise singular_gram(model.shape, model.sigma, detail=" (sparse eigensolver "
                             f"residuals {residual.max() / k_norm:.1e})")
     phi = np.stack([G @ p for p in psi.reshape(d, m, n)]).reshape(d * m, n)
     return Modes.unit_density(w2, psi, phi, model.material.rho, d)
@@ -104,9 +104,9 @@ def _shifted_factor(Kg, Mg, model):
     try:
         lu0 = spd_factor(Kg - base * Mg)
     except RuntimeError:  # "Factor is exactly singular"
-        raise singular_gram(model.shape, model.sigma_rel) from None
+        raise singular_gram(model.shape, model.sigma) from None
     if _negative_pivots(lu0):
-        raise singular_gram(model.shape, model.sigma_rel, detail=" (the truncated M_g or "
+        raise singular_gram(model.shape, model.sigma, detail=" (the truncated M_g or "
                             "K_g is indefinite; use a smaller cutoff)")
     N = Kg.shape[0]
     b = min(_ESTIMATE_BLOCK, N // 5)
