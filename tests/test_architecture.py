@@ -9,7 +9,12 @@
   public entry points that take an options object (a parameter named ``options`` and a
   ``**overrides``/``**kwargs``) for the parameter count;
 - every citation ``method.md §N`` in the package, the tests, benchmarks, examples and the
-  README names a section of docs/method.md.
+  README names a section of docs/method.md;
+- imports point down the layers of ``LAYERS`` (issue 20): the numerical core imports only
+  itself, the errors and the standard library, numpy and scipy; nothing outside the
+  applications (``apps``) imports them; the command line's flat option names
+  (``flat_fields``, ``split``, ``parse_value``) are used only in ``options`` and ``apps``;
+- no module is longer than ``MAX_MODULE_LINES`` lines.
 
 Nothing is imported from the package: these tests read files only.
 """
@@ -18,6 +23,7 @@ from __future__ import annotations
 
 import ast
 import re
+import sys
 from pathlib import Path
 
 import pytest
@@ -29,6 +35,22 @@ METHOD = ROOT / "docs" / "method.md"
 
 MAX_LINES = 60  # lines of a function body, docstring excluded (issue 14)
 MAX_PARAMS = 8  # parameters of a function, self/cls excluded (issue 14)
+MAX_MODULE_LINES = 600  # lines of a module (issue 20)
+# The layers, bottom up: a module imports modules of lower layers and of its own group.
+# ("modalmorph" itself, the public front, sits above the verbs and below the apps.)
+LAYERS = (
+    ("errors", "version"),
+    ("core",),  # numbers: shape, material, element, modes, solvers, model, dynamics, ...
+    ("options",),  # the one schema of every option
+    ("simulation", "matching", "io", "figures"),  # time integration, matching, files, plots
+    ("pipeline", "datasets"),  # morph(): the method end to end; the bundled data
+    ("track",),  # sequences, frame by frame through morph()
+    ("",),  # the package's __init__: the public API
+    ("apps",),  # command line, runs, batch, web app, report
+    ("__main__",),
+)
+CORE_DEPENDENCIES = {"numpy", "scipy"}  # and the standard library (method.md; style rule 6)
+FLAT_NAMES = {"flat_fields", "split", "parse_value"}  # the command line's option namespace
 _CITATION = re.compile(r"method\.md\W{0,3}§\s*(\d+(?:\.\d+)*)")
 _HEADING = re.compile(r"^#{1,6}\s+§?(\d+(?:\.\d+)*)[.\s]", re.MULTILINE)
 
@@ -253,6 +275,63 @@ def test_functions_take_few_parameters():
         pytest.fail(f"functions with more than {MAX_PARAMS} parameters (an entry point may "
                     f"take options=... and **overrides instead):\n"
                     + "\n".join(t for _, t in sorted(offenders, reverse=True)), pytrace=False)
+
+
+def _group(module: str) -> str:
+    """``core`` for ``modalmorph.core.model``, ``""`` for the package itself."""
+    return module.split(".")[1] if "." in module else ""
+
+
+def _layer(module: str) -> int:
+    group = _group(module)
+    for i, groups in enumerate(LAYERS):
+        if group in groups:
+            return i
+    raise AssertionError(f"{module} is in no layer of LAYERS: add its group there")
+
+
+def test_imports_point_down_the_layers():
+    offenders = []
+    for module, targets in _graph().items():
+        for target, lines in targets.items():
+            if _group(target) != _group(module) and _layer(target) >= _layer(module):
+                offenders.append(f"{module} -> {target} (line {lines[0]}): layer "
+                                 f"{_layer(module)} imports layer {_layer(target)}")
+    if offenders:
+        pytest.fail("imports that point up or sideways (see LAYERS):\n"
+                    + "\n".join(sorted(offenders)), pytrace=False)
+
+
+def _third_party(module: str) -> set[str]:
+    """Top-level names of the modules imported at module level, outside the package."""
+    names = set()
+    for node in TREES[module].body:
+        if isinstance(node, ast.Import):
+            names.update(a.name.split(".")[0] for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names.add(node.module.split(".")[0])
+    return names - {PACKAGE, "__future__"} - set(sys.stdlib_module_names)
+
+
+def test_core_needs_numpy_and_scipy_only():
+    offenders = [f"{module} imports {sorted(extra)}" for module in MODULES
+                 if _group(module) == "core"
+                 and (extra := _third_party(module) - CORE_DEPENDENCIES)]
+    assert not offenders, offenders
+
+
+def test_flat_option_names_stay_in_options_and_apps():
+    offenders = [f"{module}:{line} imports {sorted(FLAT_NAMES & set(names))}"
+                 for module in MODULES if _group(module) not in ("options", "apps")
+                 for line, target, names in _imports(module)
+                 if target == f"{PACKAGE}.options" and FLAT_NAMES & set(names)]
+    assert not offenders, offenders
+
+
+def test_modules_are_short():
+    long = {module: n for module, path in MODULES.items()
+            if (n := len(path.read_text().splitlines())) > MAX_MODULE_LINES}
+    assert not long, f"modules over {MAX_MODULE_LINES} lines: {long}"
 
 
 def _sections() -> set[str]:

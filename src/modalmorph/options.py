@@ -32,11 +32,12 @@ from .core.material import MATERIALS, POLYETHYLENE, Material
 from .core.solvers import SOLVERS
 from .errors import OptionError
 
-__all__ = ["MatchOptions", "MorphOptions", "ReadOptions", "OutputOptions",
-           "TrackOptions", "OPTION_CLASSES", "REFERENCES", "CORRESPONDENCES",
-           "flat_fields", "parameters", "split", "parse_value", "METHODS", "ROTATIONS",
-           "FREE_MOTIONS", "LOADS", "SCHEMES", "OBJECTS", "FRAME_SPACINGS", "K_RANGE",
-           "DT_RANGE", "C_MAX"]
+__all__ = [
+    "MatchOptions", "MorphOptions", "ReadOptions", "OutputOptions", "TrackOptions",
+    "OPTION_CLASSES", "REFERENCES", "CORRESPONDENCES", "flat_fields", "parameters", "split",
+    "split_overrides", "parse_value", "METHODS", "ROTATIONS", "FREE_MOTIONS", "LOADS",
+    "SCHEMES", "OBJECTS", "FRAME_SPACINGS", "K_RANGE", "DT_RANGE", "C_MAX",
+]
 
 METHODS = ("auto", "local", "global")
 ROTATIONS = ("auto", "free", "none")
@@ -345,6 +346,20 @@ def flat_fields(classes=OPTION_CLASSES):
     names = {f.name for cls in classes if cls is not MatchOptions for f in fields(cls)}
     return [((f"match_{f.name}" if cls is MatchOptions and f.name in names else f.name),
              cls, f) for cls in classes for f in fields(cls)]
+
+
+def split_overrides(overrides: dict, *, where: str) -> tuple[dict, dict]:
+    """Keyword overrides of :func:`modalmorph.morph` as ``(MorphOptions fields,
+    MatchOptions fields)``: the matcher's options under their flat names (``rotation``,
+    ``method``, ``reject``, ``match_sigma``, ``match_modes``); unknown names refused."""
+    morph_names = {f.name for f in fields(MorphOptions)}
+    match_names = {flat: f.name for flat, cls, f in flat_fields() if cls is MatchOptions}
+    unknown = sorted(set(overrides) - morph_names - set(match_names))
+    if unknown:
+        raise OptionError(f"unknown {where} option {unknown[0]!r}; known: "
+                          f"{', '.join(sorted(morph_names | set(match_names)))}")
+    return ({k: v for k, v in overrides.items() if k in morph_names},
+            {match_names[k]: v for k, v in overrides.items() if k in match_names})
 
 
 def parameters(morph) -> dict:

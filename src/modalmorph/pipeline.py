@@ -89,21 +89,17 @@ unmatched, neighbours
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 from .core.align import Similarity, align
 from .core.shape import Shape, as_shape
 from .errors import MorphDivergedError, OptionError, ShapeError
 from .matching import Matching, match
-from .options import MatchOptions, MorphOptions, flat_fields
+from .options import MatchOptions, MorphOptions, split_overrides
 from .simulation import SPARSE_MODES, Run, Simulation
 
 __all__ = ["Morph", "MorphDivergedError", "morph", "SPARSE_MODES"]
 
-# Keyword overrides of morph() that go to the matcher: the flat names of the MatchOptions
-# fields (rotation, method, reject, match_sigma, match_modes) -> the field names.
-_MATCH_NAMES = {flat: f.name for flat, cls, f in flat_fields() if cls is MatchOptions}
-_MORPH_NAMES = {f.name for f in fields(MorphOptions)}
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -202,11 +198,6 @@ def _options(options, matching, overrides: dict) -> tuple[MorphOptions, MatchOpt
         options = MorphOptions()
     elif not isinstance(options, MorphOptions):
         raise OptionError(f"options must be a MorphOptions, got {type(options).__name__}")
-    unknown = sorted(set(overrides) - _MORPH_NAMES - set(_MATCH_NAMES))
-    if unknown:
-        raise OptionError(f"unknown morph option {unknown[0]!r}; known: "
-                          f"{', '.join(sorted(_MORPH_NAMES | set(_MATCH_NAMES)))}")
-    options = options.replace(**{k: v for k, v in overrides.items() if k in _MORPH_NAMES})
+    morph_kw, match_kw = split_overrides(overrides, where="morph")
     base = matching if isinstance(matching, MatchOptions) else MatchOptions()
-    return options, base.replace(**{_MATCH_NAMES[k]: v for k, v in overrides.items()
-                                    if k in _MATCH_NAMES})
+    return options.replace(**morph_kw), base.replace(**match_kw)

@@ -72,7 +72,8 @@ def main(argv: list[str] | None = None) -> int:
         return int(exc.code or 0)
     logging.basicConfig(level=logging.WARNING if args.quiet else logging.INFO,
                         format="%(message)s")
-    logging.getLogger("modalmorph.pipeline").setLevel(logging.WARNING)  # said once, below
+    # a morph short of its tolerance is said once, by the status line or the warning below
+    logging.getLogger("modalmorph.simulation").setLevel(logging.WARNING)
     # Library warnings are collected, not printed as they come: after a successful run each
     # is one line; after an error the error's line is the only one.
     with warnings.catch_warnings(record=True) as caught:
@@ -320,7 +321,7 @@ def _run_morph(args) -> int:
     with _progress(settings.morph.max_steps, quiet=args.quiet) as progress:
         run = morph_files(args.source, args.target, args.out, settings, progress=progress)
     _report(run.result, run.files, time.perf_counter() - start, quiet=args.quiet)
-    return _converged_code([run.result])
+    return _converged_code([run.result], said=not args.quiet)
 
 
 def _run_track(args) -> int:
@@ -396,17 +397,19 @@ def _run_demo(args) -> int:
         _report(result, [args.out / name / p for p in written], time.perf_counter() - start,
                 quiet=args.quiet)
         results.append(result)
-    return _converged_code(results)
+    return _converged_code(results, said=not args.quiet)
 
 
 # ------------------------------------------------------------------------------ messages
 
 
-def _converged_code(morphs) -> int:
-    """Exit code 3 with a warning (printed even with -q) when a morph fell short."""
+def _converged_code(morphs, *, said: bool = False) -> int:
+    """Exit code 3 with a warning (printed even with -q) when a morph fell short; its
+    stop sentence only when the status line has not ``said`` it."""
     short = [m for m in morphs if not m.converged]
     for m in short:
-        _warn(f"the tolerance was not reached: {m.message} (results written)")
+        how = "" if said else f": {m.message}"
+        _warn(f"the tolerance was not reached{how} (results written)")
     return EXIT_NOT_CONVERGED if short else EXIT_OK
 
 
