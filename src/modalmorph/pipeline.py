@@ -6,84 +6,28 @@ partners by springs of stiffness ``k`` (19), unmatched nodes by the neighbourhoo
 time by mode superposition (11)-(13) and Newmark's method (14)-(15)
 (:class:`modalmorph.simulation.Simulation`).
 
-The options (:class:`modalmorph.options.MorphOptions`) and why their defaults are what
-they are:
+What each option of :class:`modalmorph.options.MorphOptions` does is in its field's help;
+why the defaults are what they are, with the measurements behind them, is in
+docs/method.md:
 
-free_motion
-    ``"similarity"`` (default): a change of position, orientation or size of the whole
-    object costs no strain energy (the energy of a displacement is that of its non-similar
-    part, ``min_a (U - S a)^T K (U - S a)`` over the similarity fields ``S``; exact for 2D,
-    small rotations in 3D): the springs then reach a target of any size or pose, and the
-    energy measures the change of shape alone. The Gaussian element's own rigid modes are
-    only nearly free (method.md §1). ``"none"``: the paper's ``U^T K U`` (22) for every
-    motion, so a size change is resisted like any strain (a heart morphed onto itself
-    scaled 1000x then stops far from it).
-loads
-    ``"nodal"``: the paper's, a force ``k (X_2 - X)`` on every node; with the element's
-    consistent mass the modes then feel different springs, so some race ahead of others (a
-    heart shrunk 1000x passed through shapes 12x rougher than either end, and folded).
-    ``"consistent"`` (default): every bit of the object is pulled towards where the targets
-    say, in proportion to its mass: in modal coordinates ``kappa (x_T - x)``, ``x_T`` the
-    mass projection of the targets' displacement onto the modes and ``kappa`` the springs'
-    mean modal stiffness, the same for every mode. A pure change of size or pose then
-    morphs along that similarity, and no mode lags behind. A reduced model (a source of
-    more than ``model_nodes`` nodes) is loaded node by node through its field either way.
-k, dt
-    ``k``: stiffness of the springs (19), in units of the elastic stiffness of one node of
-    the model; larger pulls harder (fewer steps, a closer fit; with
-    ``scheme="explicit"`` too large a ``k`` diverges). ``dt``: time step in units of
-    ``1/omega_ref`` (``omega_ref`` the natural frequency of one node on its own stiffness).
-alpha, delta
-    Newmark's parameters (14). ``delta=0.5`` has no numerical damping; ``delta > 0.5``
-    damps (first-order accurate), best with ``alpha=(delta+0.5)**2/4`` (16).
-damping
-    Rayleigh damping ``C = a M + b K`` (5) of the loaded model (elastic stiffness plus
-    springs). A pair: the damping ratios at its lowest and highest frequencies; the paper
-    used 0.005-0.03, which leaves the shape oscillating about the target for many steps. A
-    number (default 1): the ratio at the springs' frequency, growing in proportion to the
-    frequency above it (stiffness-proportional), so that every mode creeps to the target
-    at nearly the same rate and the shape moves along nearly straight paths. Measured on
-    the shared hearts: with the former default (2, 2) the stiff modes raced ahead of the
-    soft ones, and intermediate shapes were up to 1.9x rougher than either end and folded
-    on 8 of 16 pairs (and on a heart shrunk 1000x); with 1, none.
-c_x, c_v
-    Initial displacement as a fraction of the load (17), (21) and initial velocity ``c_v``
-    times it (18). Larger values start faster.
-sigma, modes, solver
-    Gaussian width of the physical model in units of its mean node spacing (``None``: 1,
-    or less where the Gram matrix would be ill-conditioned; the matcher's models have
-    their own width, ``match_sigma``). Modes superposed: all (``None``; with the sparse
-    solver the lowest 100), a count, or a fraction of all (the paper compares all with
-    2/3). ``solver="auto"`` uses the exact dense eigensolver for small objects and the
-    truncated sparse one for large objects.
-model_nodes
-    A source with more nodes is modelled on this many nodes spread evenly over it (by arc
-    length for contours), and every node moves with the element's displacement field
-    ``u(x) = sum_k h_k(x) U_k`` (3)-(4); its load enters through the same field, and the
-    local energy is spread from the model nodes over the nodes around them. The default,
-    400, was measured: with 300, 4 of the 186 glyph outlines at 400 nodes folded for 1-4
-    steps beside a serif (the interpolated field lets neighbouring nodes overtake where the
-    displacement turns sharply); with 400, none, at twice the cost of a 1000-node morph
-    (0.16 -> 0.28 s, still 22x the dense transcription).
-scheme
-    ``"implicit"``: loads at the new shape (the spring enters the effective stiffness;
-    unconditionally stable). ``"explicit"``: at the previous shape, as in the paper
-    (stable only for small ``k``).
-tol, tol_distance, max_steps, equilibrium_tol
-    Converged when :attr:`Morph.distance` falls below ``tol`` times the target's RMS
-    radius (``tol_distance``: in the user's units): for contours, when the shape is that
-    close to the whole target curve both ways. At equilibrium when no node moves by more
-    than ``equilibrium_tol`` times the target's size in a step, or the distance changed by
-    less than 0.1 % over 5 steps (0 disables both).
-unmatched, neighbours
-    Where an unmatched node of a contour is pulled, between the partners of its matched
-    neighbours. ``"arclength"`` (default): to the point of the target stretch between
-    those partners at the node's fraction of the source stretch's arc length, so a run of
-    unmatched nodes spreads evenly over it. ``"mean"``: the paper's rule (20), a weighted
-    mean of the target nodes of that stretch; it pulls every node of a long run to nearly
-    one point, which folds the contour (measured: the 28 pairs of bundled hands at full
-    resolution cross themselves). 3D point sets use the (20)-weighted displacements of
-    their ``neighbours`` nearest matched nodes (:class:`modalmorph.core.dynamics.LoadTargets`).
+- ``free_motion="similarity"``: a change of position, orientation or size costs no strain
+  energy, so the springs reach a target of any size or pose (method.md §4, "Similarity-free
+  stiffness"); ``"none"`` is the paper's ``U^T K U`` (22) for every motion.
+- ``loads="consistent"``: every bit of the object is pulled in proportion to its mass, so
+  no mode lags behind; ``"nodal"`` is the paper's force on every node (method.md §4,
+  "Consistent loads").
+- ``damping=1``: the ratio at the springs' frequency, growing with frequency, so every mode
+  creeps to the target at nearly the same rate and nothing folds; a pair is the paper's
+  Rayleigh damping by two ratios (method.md §4, "Damping (5)").
+- ``unmatched="arclength"``: a run of unmatched nodes spreads evenly over the target stretch
+  between its neighbours' partners; ``"mean"`` is the paper's rule (20), which folds long
+  runs (method.md §4, "Springs (19) and unmatched nodes (20)").
+- ``model_nodes=400``: larger sources are modelled on 400 nodes spread over them and move
+  with the element's field (method.md §7, "Reduced models in the dynamics").
+- ``scheme="implicit"``: the spring enters the effective stiffness, unconditionally stable;
+  ``"explicit"`` is the paper's (stable for small ``k`` only).
+- ``tol``: converged when :attr:`Morph.distance` (the stop test's measure, both ways for
+  contours and surfaces) is below ``tol`` times the target's RMS radius (method.md §5).
 """
 
 from __future__ import annotations
