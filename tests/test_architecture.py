@@ -39,7 +39,7 @@ MAX_MODULE_LINES = 600  # lines of a module (issue 20)
 # The layers, bottom up: a module imports modules of lower layers and of its own group.
 # ("modalmorph" itself, the public front, sits above the verbs and below the apps.)
 LAYERS = (
-    ("errors", "version"),
+    ("errors", "version", "threads"),
     ("core",),  # numbers: shape, material, element, modes, solvers, model, dynamics, ...
     ("options",),  # the one schema of every option
     ("simulation", "matching", "io", "figures"),  # time integration, matching, files, plots

@@ -368,14 +368,6 @@ def test_no_figures_alone_still_writes_the_animation(hand_csvs, tmp_path):
                                                      "result.json", "shapes.npz"]
 
 
-def test_small_problems_compute_with_one_blas_thread():
-    from threadpoolctl import threadpool_info
-
-    with runs.blas_threads(runs.ONE_THREAD_NODES):
-        assert all(p["num_threads"] == 1 for p in threadpool_info()
-                   if p["user_api"] == "blas")
-
-
 def test_track_json_records_the_frame_files_and_options(tmp_path):
     import hashlib
 

@@ -41,6 +41,7 @@ from .errors import MorphDivergedError, OptionError, ShapeError
 from .matching import Matching, match
 from .options import MatchOptions, MorphOptions, split_overrides
 from .simulation import SPARSE_MODES, Run, Simulation
+from .threads import limit
 
 __all__ = ["Morph", "MorphDivergedError", "morph", "SPARSE_MODES"]
 
@@ -120,18 +121,19 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
         raise ShapeError(f"source and target must have the same dimension, got "
                          f"{src.dim}D and {tgt.dim}D")
     options, match_options = _options(options, matching, overrides)
-    if matching is None or isinstance(matching, MatchOptions):
-        matching = match(src, tgt, options=match_options)
-    elif isinstance(matching, Matching):
-        matching, match_options = matching.check(src.m, tgt.m), matching.options
-    else:
-        matching, match_options = Matching.given(matching, src.m, tgt.m), None
-    pairs = matching.pairs
-    similarity, work = None, src
-    if options.remove_rigid:  # section 5.2: Horn's similarity from the matched pairs
-        similarity = align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]], scale=True)
-        work = src.with_points(similarity.apply(src.points))
-    run = Simulation(work, tgt, pairs, options).run(progress).result()
+    with limit(max(src.m, tgt.m)):
+        if matching is None or isinstance(matching, MatchOptions):
+            matching = match(src, tgt, options=match_options)
+        elif isinstance(matching, Matching):
+            matching, match_options = matching.check(src.m, tgt.m), matching.options
+        else:
+            matching, match_options = Matching.given(matching, src.m, tgt.m), None
+        pairs = matching.pairs
+        similarity, work = None, src
+        if options.remove_rigid:  # section 5.2: Horn's similarity from the matched pairs
+            similarity = align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]], scale=True)
+            work = src.with_points(similarity.apply(src.points))
+        run = Simulation(work, tgt, pairs, options).run(progress).result()
     return Morph(**vars(run), matching=matching, similarity=similarity, source=src,
                  target=tgt, options=options, match_options=match_options)
 

@@ -32,6 +32,7 @@ from .options import (
     parameters,
 )
 from .pipeline import Morph, morph
+from .threads import limit
 
 __all__ = ["REFERENCES", "CORRESPONDENCES", "Track", "TrackOptions", "track",
            "curve_distance"]
@@ -170,10 +171,11 @@ def track(frames, *, options: TrackOptions | None = None,
     shapes, names = _frames(frames, names, opts.start_node)
     step = partial(_morph_frame, names=names, match_options=match_opts,
                    morph_options=morph_opts)
-    morphs = _follow(shapes, opts.reference, step, progress)
     first = shapes[0]
-    points = np.array([first.points, *[r.shapes[-1] for r in morphs]])
-    closure = step(first.with_points(points[-1]), first, 0) if opts.cycle else None
+    with limit(max(shape.m for shape in shapes)):
+        morphs = _follow(shapes, opts.reference, step, progress)
+        points = np.array([first.points, *[r.shapes[-1] for r in morphs]])
+        closure = step(first.with_points(points[-1]), first, 0) if opts.cycle else None
     params = dict(asdict(opts), segments=opts.segments if first.ordered else 0,
                   start_node=int(opts.start_node),
                   match_options={} if match_opts is None else match_opts.record(),

@@ -10,14 +10,11 @@ record in ``result.json`` are generated from all of them alike (flat names:
 
 from __future__ import annotations
 
-import contextlib
 import glob
 import hashlib
 import os
 from dataclasses import MISSING, dataclass, field
 from pathlib import Path
-
-from threadpoolctl import threadpool_limits
 
 from .. import figures
 from ..core.material import Material
@@ -41,18 +38,15 @@ from ..options import (
     split,
 )
 from ..pipeline import morph
+from ..threads import limit
 from ..track import track
 from .report import input_images, write_html
 
 __all__ = ["Settings", "ItemRun", "PAIR_CLASSES",
-           "SEQUENCE_CLASSES", "BATCH_CLASSES", "FORM_CLASSES", "ONE_THREAD_NODES",
-           "blas_threads", "check_tools", "default_text", "file_record", "input_records",
+           "SEQUENCE_CLASSES", "BATCH_CLASSES", "FORM_CLASSES",
+           "check_tools", "default_text", "file_record", "input_records",
            "read_pair", "compute_morph", "morph_files", "track_files", "write_morph"]
 
-# Up to this many nodes match + morph run faster on one BLAS thread than on two (hands
-# pairs, best of 5 on a 2-core machine: 250 nodes 0.12 s with one thread, 0.23 s with
-# two; 1000 nodes 0.42 s and 0.77 s); beyond, BLAS keeps its own count.
-ONE_THREAD_NODES = 1000
 
 
 # The option classes of each command, in the order of their flags and records.
@@ -181,7 +175,7 @@ def _read_kwargs(read: ReadOptions) -> dict:
 
 def compute_morph(source, target, settings: Settings, *, progress=None):
     """:func:`modalmorph.match` then :func:`modalmorph.morph` with the settings."""
-    with blas_threads(max(source.m, target.m)):
+    with limit(max(source.m, target.m)):
         matching = match(source, target, options=settings.match)
         return morph(source, target, matching=matching, options=settings.morph,
                      progress=progress)
@@ -244,7 +238,7 @@ def track_files(inputs, out, settings: Settings | None = None, *, progress=None)
     out = Path(out)
     with atomic_output_dir(out) as tmp:
         frames = read_frames(inputs, **_read_kwargs(settings.read))
-        with blas_threads(max(shape.m for shape in frames.shapes)):
+        with limit(max(shape.m for shape in frames.shapes)):
             result = track(frames.shapes, names=frames.names, options=seq,
                            match_options=settings.match
                            if seq.correspondence == "modal" else None,
@@ -264,13 +258,3 @@ def _write_track_renderings(result, folder: Path, output: OutputOptions) -> None
     for wanted, name in ((output.gif, "track.gif"), (output.mp4, "track.mp4")):
         if wanted:
             figures.animate_track(result, folder / name)
-
-
-@contextlib.contextmanager
-def blas_threads(nodes: int):
-    """Limit BLAS to one thread for shapes of up to :data:`ONE_THREAD_NODES` nodes."""
-    if nodes > ONE_THREAD_NODES:
-        yield
-        return
-    with threadpool_limits(limits=1, user_api="blas"):
-        yield

@@ -1,0 +1,53 @@
+"""The BLAS thread policy of the library's calls (modalmorph.threads)."""
+
+import numpy as np
+import pytest
+from threadpoolctl import threadpool_info
+
+import modalmorph as mm
+from modalmorph import threads
+
+
+def _blas_threads() -> set[int]:
+    return {p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"}
+
+
+def test_small_problems_run_on_one_thread_and_the_outer_call_decides():
+    with threads.limit(threads.ONE_THREAD_NODES):
+        assert _blas_threads() == {1}
+        with threads.limit(10**6):  # a nested call keeps the outer choice
+            assert _blas_threads() == {1}
+        assert _blas_threads() == {1}
+
+
+def test_the_user_overrides_the_policy(monkeypatch):
+    threads.set_blas_threads(2)
+    try:
+        assert threads.blas_threads(10) == 2
+    finally:
+        threads.set_blas_threads(None)
+    monkeypatch.setenv("MODALMORPH_BLAS_THREADS", "3")
+    assert threads.blas_threads(10) == 3
+    monkeypatch.setenv("MODALMORPH_BLAS_THREADS", "many")
+    with pytest.raises(ValueError, match="MODALMORPH_BLAS_THREADS must be an integer"):
+        threads.blas_threads(10)
+    with pytest.raises(ValueError, match="count must be an integer >= 1"):
+        threads.set_blas_threads(0)
+
+
+def test_large_problems_use_the_free_cores():
+    assert threads.blas_threads(10**6) >= 1
+
+
+def test_morph_computes_inside_the_policy(monkeypatch):
+    seen = []
+    real = mm.pipeline.Simulation.run
+
+    def spy(self, progress=None):
+        seen.append(_blas_threads())
+        return real(self, progress)
+
+    monkeypatch.setattr(mm.pipeline.Simulation, "run", spy)
+    a = np.linspace(0.0, 2.0 * np.pi, 30, endpoint=False)
+    mm.morph(np.c_[np.cos(a), np.sin(a)], np.c_[2 * np.cos(a), np.sin(a)])
+    assert seen == [{1}]
