@@ -44,7 +44,7 @@ LAYERS = (
     ("options",),  # the one schema of every option
     ("simulation", "matching", "io", "figures"),  # time integration, matching, files, plots
     ("pipeline", "datasets"),  # morph(): the method end to end; the bundled data
-    ("track",),  # sequences, frame by frame through morph()
+    ("tracking",),  # track(): sequences, frame by frame through morph()
     ("",),  # the package's __init__: the public API
     ("apps",),  # command line, runs, batch, web app, report
     ("__main__",),

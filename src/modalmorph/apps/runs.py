@@ -39,7 +39,7 @@ from ..options import (
 )
 from ..pipeline import morph
 from ..threads import limit
-from ..track import track
+from ..tracking import track
 from .report import input_images, write_html
 
 __all__ = ["Settings", "ItemRun", "PAIR_CLASSES",
