@@ -384,3 +384,26 @@ def test_track_json_records_the_frame_files_and_options(tmp_path):
         p.read_bytes()).hexdigest()} for p in files]
     assert data["options"]["reference"] == "first" and data["options"]["k"] == 100.0
     assert set(data["options"]) == {name for name, _, _ in flat_fields(runs.SEQUENCE_CLASSES)}
+
+
+def test_ctrl_c_says_one_line_exits_130_and_leaves_nothing(tmp_path):
+    """SIGINT while a morph computes: one line, exit 130, no output folder, no staging."""
+    import signal
+    import time
+
+    a = np.linspace(0.0, 2.0 * np.pi, 3000, endpoint=False)
+    np.savetxt(tmp_path / "a.csv", np.c_[np.cos(a), np.sin(a)], delimiter=",")
+    np.savetxt(tmp_path / "b.csv", np.c_[2 * np.cos(a), np.sin(a) + 0.3 * np.cos(5 * a)],
+               delimiter=",")
+    proc = subprocess.Popen([sys.executable, "-m", "modalmorph", "morph", "a.csv", "b.csv",
+                             "--out", "out", "--tol", "1e-9", "--max-steps", "500", "-q"],
+                            cwd=tmp_path, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60.0
+    while not list(tmp_path.glob(".out.modalmorph-tmp-*")) and time.monotonic() < deadline:
+        time.sleep(0.05)  # the staging folder is made before any computation
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == ["modalmorph: interrupted"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "b.csv"]

@@ -54,7 +54,8 @@ EXIT_CODES = {
     EXIT_USAGE: "bad input or usage: one line names the file or option and the problem",
     EXIT_NOT_CONVERGED: "results written, but the tolerance was not reached (a warning "
                         "says where, even with -q)",
-    EXIT_INTERRUPTED: "batch interrupted by Ctrl-C (finished items are kept)",
+    EXIT_INTERRUPTED: "interrupted by Ctrl-C: nothing half-written is left (a batch keeps its "
+                      "finished items)",
 }
 _EPILOG = "exit codes:\n" + "\n".join(f"  {code:<4} {what}" for code, what in
                                        EXIT_CODES.items())
@@ -80,6 +81,9 @@ def main(argv: list[str] | None = None) -> int:
         warnings.simplefilter("default")
         try:
             code = args.run(args)
+        except KeyboardInterrupt:  # output folders are replaced whole or not at all
+            print("modalmorph: interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
         except Exception as exc:  # noqa: BLE001 - one line, never a traceback
             known = isinstance(exc, ValueError | OSError | ImportError | MorphDivergedError)
             text = " ".join(str(exc).split())
