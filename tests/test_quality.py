@@ -169,3 +169,27 @@ def test_correspondence_rotation(hand200, rng):
     assert_allclose(got, want, atol=1e-7)
     with pytest.raises(ValueError, match="pairs must be an integer array"):
         correspondence_rotation(hand200, hand200, np.zeros((3, 2)))
+
+
+def test_check_simple_refuses_stars_and_figure_eights_and_says_where():
+    from modalmorph.core.quality import check_simple, crossing_segments
+    from modalmorph.errors import ShapeError
+
+    t = np.linspace(0.0, 2.0 * np.pi, 5, endpoint=False)
+    star = np.c_[np.cos(2 * t), np.sin(2 * t)]  # {5/2}: five crossings
+    assert crossing_segments(star).tolist() == [[0, 2], [0, 3], [1, 3], [1, 4], [2, 4]]
+    with pytest.raises(ShapeError, match=r"star crosses itself: the segment from node 0 to "
+                                         r"1 crosses the one from node 2 to 3 at \(0.309, "):
+        check_simple(star, "star")
+    s = np.linspace(0.0, 2.0 * np.pi, 100, endpoint=False) + 0.01
+    with pytest.raises(ShapeError, match="eight crosses itself"):
+        check_simple(np.c_[np.sin(s), np.sin(2 * s)], "eight")
+
+
+def test_check_simple_accepts_the_tiny_loops_of_real_outlines():
+    from modalmorph.core.quality import check_simple, crossing_segments
+    from modalmorph.datasets import load_hand
+
+    hand = load_hand(3)  # statismo's annotation has loops of a few nodes
+    assert len(crossing_segments(hand)) > 0
+    check_simple(hand, "hand 3")

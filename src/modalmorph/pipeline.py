@@ -36,6 +36,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from .core.align import Similarity, align
+from .core.quality import check_simple
 from .core.shape import Shape, as_shape
 from .errors import MorphDivergedError, OptionError, ShapeError
 from .matching import Matching, match
@@ -120,6 +121,9 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
     if src.dim != tgt.dim:
         raise ShapeError(f"source and target must have the same dimension, got "
                          f"{src.dim}D and {tgt.dim}D")
+    for name, shape in (("source", src), ("target", tgt)):
+        if shape.dim == 2 and shape.ordered:
+            check_simple(shape.points, name, shape.closed)
     options, match_options = _options(options, matching, overrides)
     with limit(max(src.m, tgt.m)):
         if matching is None or isinstance(matching, MatchOptions):
