@@ -69,6 +69,18 @@ def test_read_shape_on_the_corpus_raises_only_named_value_errors(corpus):
     assert outcomes["refused"] > 400 and outcomes["ok"] > 50  # both kinds exercised
 
 
+def test_read_frames_on_the_corpus_raises_only_named_input_file_errors(corpus):
+    from modalmorph.io import read_frames
+
+    for path in corpus:  # one file: a sequence only if it holds several frames
+        try:
+            frames = read_frames(path)
+        except InputFileError as exc:
+            assert str(exc).startswith(f"{path}"), str(exc)
+        else:
+            assert len(frames.shapes) >= 2
+
+
 @pytest.mark.parametrize("name, message", [
     ("off_only.off", "not an OFF file"),
     ("ply_only.ply", "not a PLY file"),

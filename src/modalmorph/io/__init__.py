@@ -59,7 +59,7 @@ from .atomic import (
     remove_leftovers,
 )
 from .base import DEFAULT_NODES, RawShape, Reader, make_shape
-from .guard import READ_SECONDS, read_guarded
+from .guard import READ_SECONDS, guarded, read_guarded
 from .images import INSIDE_FRACTION, MAX_PARTIAL_ALPHA, MIN_OBJECT_PIXELS, read_image
 from .meshes import read_mesh
 from .points import read_json, read_npy, read_npz, read_text, write_points
@@ -245,6 +245,8 @@ def read_frames(inputs, options: ReadOptions | None = None, **overrides) -> Fram
 def _frames_of(path, options: ReadOptions) -> tuple[list, list]:
     """(names, shapes) of the frames of one input: a pattern, a folder or a file."""
     files = sequence_files(path, SUPPORTED_EXTENSIONS)
-    if files is None:
+    if files is not None:
+        return [os.fspath(f) for f in files], [read_shape(f, options) for f in files]
+    size = Path(path).stat().st_size if Path(path).is_file() else 0
+    with guarded(os.fspath(path), size):  # a file of several frames: read as read_shape's
         return file_frames(path, options, read_shape)
-    return [os.fspath(f) for f in files], [read_shape(f, options) for f in files]

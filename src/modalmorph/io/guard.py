@@ -12,7 +12,8 @@ from ..errors import InputFileError
 from ..options import ReadOptions
 from .base import RawShape, Reader
 
-__all__ = ["READ_SECONDS", "READ_SECONDS_PER_MB", "ReadTimeout", "deadline", "read_guarded"]
+__all__ = ["READ_SECONDS", "READ_SECONDS_PER_MB", "ReadTimeout", "deadline", "guarded",
+           "read_guarded"]
 
 # A read that takes longer than this is stopped (a parser stuck on a malformed file): base
 # seconds plus seconds per MB. The slowest reader measured, meshio on ASCII PLY, takes
@@ -23,24 +24,31 @@ READ_SECONDS_PER_MB = 2.0
 
 
 def read_guarded(reader: Reader, path: Path, name: str, options: ReadOptions) -> RawShape:
-    """Run the reader with bounded time; every failure an InputFileError naming the file.
+    """``reader(path, name, options)`` under :func:`guarded`."""
+    with guarded(name, path.stat().st_size):
+        return reader(path, name, options)
+
+
+@contextmanager
+def guarded(name: str, size: int):
+    """Run the block (the read of file ``name`` of ``size`` bytes) with bounded time;
+    every failure an InputFileError naming the file.
 
     Third-party parsers raise many types for a malformed file (and numpy a MemoryError for
     an absurd size in a header); they are reported as the file's problem. A parse that runs
-    past its deadline (:data:`READ_SECONDS`, more for large files) is interrupted.
+    past its deadline (:data:`READ_SECONDS`, more for large files) is interrupted. An
+    InputFileError passes as it is (it names its file, or its frame).
     """
-    seconds = READ_SECONDS + READ_SECONDS_PER_MB * path.stat().st_size / 1e6
+    seconds = READ_SECONDS + READ_SECONDS_PER_MB * size / 1e6
     try:
         with deadline(seconds):
-            return reader(path, name, options)
-    except ImportError:
+            yield
+    except (ImportError, InputFileError):
         raise
     except ReadTimeout:
         raise InputFileError(f"{name}: cannot read it: the reader did not finish within "
                              f"{seconds:.0f} s (a malformed file?)") from None
     except ValueError as exc:
-        if isinstance(exc, InputFileError) and str(exc).startswith(name):
-            raise
         text = str(exc)
         raise InputFileError(text if text.startswith(name) else f"{name}: {text}") from None
     except MemoryError as exc:

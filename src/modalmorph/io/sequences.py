@@ -130,10 +130,13 @@ def _image_frames(images, pattern: str, options: ReadOptions):
 def _csv_frames(path: Path, name: str, options: ReadOptions, read):
     """One frame per value of the ``frame`` column of a text file with a header; the file
     as one frame (read with ``nodes`` only) when it has no such column."""
-    lines = [ln for ln in path.read_text(encoding="utf-8-sig").splitlines()
-             if ln.strip() and not ln.lstrip().startswith("#")]
-    sep = next((s for s in ("\t", ";", ",") if s in lines[0]), None)
-    header = [h.strip().strip("\"'").lower() for h in lines[0].split(sep)]
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        text = ""  # not text: the reader of one frame says so
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    sep = next((s for s in ("\t", ";", ",") if s in lines[0]), None) if lines else None
+    header = [h.strip().strip("\"'").lower() for h in lines[0].split(sep)] if lines else []
     if "frame" not in header:
         return [name], [read(path, ReadOptions(nodes=options.nodes))]
     if "x" not in header or "y" not in header:
