@@ -25,7 +25,8 @@ errors) and :mod:`.base` (:class:`~.base.RawShape`, what every reader returns).
 Every problem with a file is an :class:`~modalmorph.errors.InputFileError` (a
 ``ValueError``) whose message starts with the file's name, so the command line can print
 it as it is: third-party parsers' own exceptions, memory errors for absurd sizes and a
-parse that runs past :data:`READ_SECONDS` included. The read options are
+parse that runs past :data:`~.guard.READ_SECONDS` included (read there: set it in
+:mod:`.guard`). The read options are
 :class:`~modalmorph.options.ReadOptions`, which validates them.
 
 Output folders are written whole (:func:`atomic_output_dir`): built in a hidden sibling
