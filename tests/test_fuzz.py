@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from modalmorph.apps.cli import main
+from modalmorph.errors import InputFileError
 from modalmorph.io import read_shape
 
 from .fuzz_corpus import CONTOUR, write_corpus, write_good_csv
@@ -58,6 +59,7 @@ def test_read_shape_on_the_corpus_raises_only_named_value_errors(corpus):
         try:
             shape = read_shape(path)
         except ValueError as exc:
+            assert type(exc) is InputFileError, (path, exc)
             assert str(exc).startswith(f"{path}: "), str(exc)
             assert "\n" not in str(exc)
             outcomes["refused"] += 1
@@ -65,6 +67,18 @@ def test_read_shape_on_the_corpus_raises_only_named_value_errors(corpus):
             assert np.isfinite(shape.points).all()
             outcomes["ok"] += 1
     assert outcomes["refused"] > 400 and outcomes["ok"] > 50  # both kinds exercised
+
+
+def test_read_frames_on_the_corpus_raises_only_named_input_file_errors(corpus):
+    from modalmorph.io import read_frames
+
+    for path in corpus:  # one file: a sequence only if it holds several frames
+        try:
+            frames = read_frames(path)
+        except InputFileError as exc:
+            assert str(exc).startswith(f"{path}"), str(exc)
+        else:
+            assert len(frames.shapes) >= 2
 
 
 @pytest.mark.parametrize("name, message", [
@@ -96,17 +110,17 @@ def test_mesh_without_faces_is_a_point_cloud(corpus, name):
 
 
 def test_stuck_reader_is_stopped(tmp_path, monkeypatch):
-    import modalmorph.io as io_module
+    from modalmorph.io import READERS, guard
 
-    def spin(path, name, ext, threshold):
+    def spin(path, name, options):
         while True:
             pass
 
-    monkeypatch.setattr(io_module, "_read_file", spin)
-    monkeypatch.setattr(io_module, "READ_SECONDS", 0.2)
+    monkeypatch.setitem(READERS, ".csv", spin)
+    monkeypatch.setattr(guard, "READ_SECONDS", 0.2)
     path = tmp_path / "a.csv"
     path.write_text("1,2\n")
-    with pytest.raises(ValueError, match=f"^{path}: cannot read it: the reader did not "):
+    with pytest.raises(InputFileError, match=f"^{path}: cannot read it: the reader did not "):
         read_shape(path)
 
 

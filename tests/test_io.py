@@ -5,18 +5,22 @@ import os
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 import modalmorph
-import modalmorph.io as io_module
 from modalmorph.core.shape import ImageFrame, Shape
+from modalmorph.errors import InputFileError, OptionError
 from modalmorph.io import (
     DEFAULT_NODES,
     OUTPUT_MARKER,
+    READERS,
     SUPPORTED_EXTENSIONS,
+    RawShape,
+    atomic,
     atomic_output_dir,
     atomic_write,
     read_shape,
@@ -24,7 +28,7 @@ from modalmorph.io import (
     save_result,
     write_points,
 )
-from modalmorph.options import parameters
+from modalmorph.options import ReadOptions, parameters
 
 # A small non-symmetric 2D contour (a pentagon-ish outline) and a 3D point set.
 SQUARE = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.5, 1.5], [0.0, 1.0]])
@@ -406,8 +410,8 @@ def test_image_object_choice_is_logged_and_prefers_objects_inside(tmp_path, capl
     assert_allclose(np.ptp(strip.points, axis=0), (29.0, 79.0), atol=1.0)
     with pytest.raises(ValueError, match=_err(path) + r"object=9, but the image has 4 "):
         read_shape(path, object=9)
-    with pytest.raises(ValueError, match="object must be 'largest', 'center' or a label"):
-        read_shape(path, object="biggest")
+    with pytest.raises(OptionError, match="object must be one of largest, center or a label"):
+        read_shape(path, object="biggest")  # checked once, by ReadOptions
 
 
 def test_image_a_speck_inside_does_not_outrank_a_large_object_on_the_border(tmp_path,
@@ -624,6 +628,80 @@ def test_write_points_errors(tmp_path):
     assert not list(tmp_path.iterdir())
 
 
+# -- the reader table, the options, the error type ---------------------------------------
+
+
+def test_every_file_problem_is_an_input_file_error(tmp_path):
+    (tmp_path / "words.csv").write_text("x,y\n1,a\n")
+    (tmp_path / "junk.npy").write_text("not numpy")  # numpy's own failure, named
+    (tmp_path / "a.xyz").write_text("1,2\n")
+    (tmp_path / "empty.json").write_text("")
+    for name, message in [("nope.csv", "no such file"), ("words.csv", "line 2: 'a'"),
+                          ("junk.npy", "cannot read it as a .npy file"),
+                          ("a.xyz", "unknown file extension"),
+                          ("empty.json", "the file is empty")]:
+        with pytest.raises(InputFileError, match=_err(tmp_path / name) + message):
+            read_shape(tmp_path / name)
+    with pytest.raises(InputFileError, match=_err(tmp_path / "words.csv")):
+        modalmorph.io.read_frames([tmp_path / "words.csv", tmp_path / "words.csv"])
+    with pytest.raises(InputFileError, match="no file matches the pattern"):
+        modalmorph.io.read_frames(tmp_path / "none-*.png")
+    assert issubclass(InputFileError, ValueError)  # callers catching ValueError still do
+
+
+def test_read_options_object_and_keyword_overrides(tmp_path):
+    path = _written(tmp_path / "s.csv", SQUARE)
+    by_keyword = read_shape(path, nodes=40)
+    by_options = read_shape(path, ReadOptions(nodes=40))
+    assert_array_equal(by_options.points, by_keyword.points)
+    overridden = read_shape(path, options=ReadOptions(nodes=40), nodes=30)
+    assert overridden.m == 30  # a keyword overrides the options' field
+    with pytest.raises(OptionError, match="unknown ReadOptions option 'node'"):
+        read_shape(path, node=40)
+    with pytest.raises(OptionError, match="options must be a ReadOptions, got int"):
+        read_shape(path, 40)
+    frames = modalmorph.io.read_frames([path, path], ReadOptions(nodes=12))
+    assert [s.m for s in frames.shapes] == [12, 12]
+
+
+def test_the_reader_table(tmp_path, monkeypatch):
+    assert tuple(READERS) == SUPPORTED_EXTENSIONS
+    assert all(ext == ext.lower() and ext.startswith(".") for ext in READERS)
+    seen = []
+
+    def reader(path, name, options):  # a new reader: the table is the only place to add it
+        seen.append((name, options.nodes))
+        return RawShape(SQUARE, closed=False)
+
+    path = tmp_path / "s.csv"
+    path.write_text("anything")
+    monkeypatch.setitem(READERS, ".csv", reader)
+    shape = read_shape(path, nodes=None)
+    assert seen == [(str(path), None)]
+    assert_array_equal(shape.points, SQUARE) and not shape.closed
+
+
+def test_every_writer_writes_through_atomic_write(tmp_path, monkeypatch):
+    from modalmorph.io import points, results, vtk
+
+    written = []
+
+    def recording(path):
+        written.append(Path(path).name)
+        return atomic.atomic_write(path)
+
+    for module in (points, results, vtk):
+        monkeypatch.setattr(module, "atomic_write", recording)
+    morph = _small_morph()
+    save_result(morph, tmp_path / "out")
+    assert sorted(written) == ["final_shape.csv", "result.json", "shapes.npz"]
+    written.clear()
+    pytest.importorskip("meshio")
+    modalmorph.io.write_vtk_series(morph, tmp_path / "vtk")
+    assert sorted(written) == sorted(p.name for p in (tmp_path / "vtk").iterdir())
+    assert len(written) == morph.steps + 2  # one .vtu per state and the .pvd
+
+
 # -- results and atomic output -------------------------------------------------------------
 
 
@@ -692,7 +770,7 @@ def test_atomic_output_dir(tmp_path):
 
 
 def test_atomic_output_dir_without_exchange(tmp_path, monkeypatch):
-    monkeypatch.setattr(io_module, "_exchange", lambda a, b: False)  # rename aside instead
+    monkeypatch.setattr(atomic, "_exchange", lambda a, b: False)  # rename aside instead
     final = tmp_path / "results"
     final.mkdir()
     (final / OUTPUT_MARKER).write_text("old")

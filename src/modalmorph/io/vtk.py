@@ -1,10 +1,15 @@
-"""VTK output: a morph as one VTU file per step and a ParaView ``.pvd`` collection."""
+"""VTK output: a morph as one VTU file per step and a ParaView ``.pvd`` collection, each
+file written atomically."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
+
+from .atomic import atomic_write
+
+__all__ = ["write_vtk_series"]
 
 
 def write_vtk_series(morph, out_dir, *, name: str = "morph") -> Path:
@@ -50,17 +55,20 @@ def write_vtk_series(morph, out_dir, *, name: str = "morph") -> Path:
     entries = []
     for j, points in enumerate(shapes):
         fname = f"{name}_{j:04d}.vtu"
-        meshio.Mesh(pad(points), cells, point_data={
+        mesh = meshio.Mesh(pad(points), cells, point_data={
             "load": pad(loads[j]), "energy": energy[j],
             "displacement": pad(points - shapes[0]),
-        }).write(out / fname)
+        })
+        with atomic_write(out / fname) as tmp:
+            mesh.write(tmp)
         entries.append(f'    <DataSet timestep="{j}" group="" part="0" '
                        f"file={quoteattr(fname)}/>")
     pvd = out / f"{name}.pvd"
-    pvd.write_text('<?xml version="1.0"?>\n'
-                   '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">\n'
-                   "  <Collection>\n" + "\n".join(entries) + "\n  </Collection>\n"
-                   "</VTKFile>\n")
+    with atomic_write(pvd) as tmp:
+        tmp.write_text('<?xml version="1.0"?>\n'
+                       '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">\n'
+                       "  <Collection>\n" + "\n".join(entries) + "\n  </Collection>\n"
+                       "</VTKFile>\n")
     return pvd
 
 

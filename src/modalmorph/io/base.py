@@ -1,0 +1,81 @@
+"""What every reader returns (:class:`RawShape`) and how coordinates read from a file
+become a :class:`~modalmorph.core.shape.Shape` (:func:`make_shape`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..core.shape import ImageFrame, Shape, resample
+from ..errors import InputFileError
+from ..options import ReadOptions
+
+__all__ = ["DEFAULT_NODES", "RawShape", "Reader", "make_shape"]
+
+# Nodes sampled along an image contour or an SVG path when ``nodes`` is not given.
+DEFAULT_NODES = 200
+
+
+@dataclass(frozen=True)
+class RawShape:
+    """What a reader found in a file, before :func:`modalmorph.io.read_shape` checks it.
+
+    Attributes
+    ----------
+    points : ndarray, shape (m, d)
+        The coordinates as read (checked later by :func:`make_shape`).
+    faces : ndarray of int, shape (f, 3), optional
+        Triangles, for surfaces.
+    closed : bool, optional
+        Whether the file says the contour closes; None: it does not say (closed).
+    frame : ImageFrame, optional
+        Pixel or SVG coordinates, y down (images and SVG).
+    default_nodes : int, optional
+        Nodes to resample to when ``nodes`` is not given: :data:`DEFAULT_NODES` for
+        outlines sampled from an image or a drawing; None keeps the file's nodes.
+    drop_closing_repeat : bool
+        Whether a last node repeating the first (a contour written closed) is dropped;
+        False for a mesh's points.
+    """
+
+    points: np.ndarray
+    faces: np.ndarray | None = None
+    closed: bool | None = None
+    frame: ImageFrame | None = None
+    default_nodes: int | None = None
+    drop_closing_repeat: bool = True
+
+
+# A reader: (the file, its name as given, the read options) -> what the file holds.
+Reader = Callable[[Path, str, ReadOptions], RawShape]
+
+
+def make_shape(name, pts, *, faces=None, nodes=None, closed=True, frame=None) -> Shape:
+    """Check an (m, d) array of coordinates from ``name``; resample; build the Shape."""
+    pts = np.asarray(pts, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] not in (2, 3):
+        raise InputFileError(f"{name}: expected an (m, 2) or (m, 3) array of coordinates, "
+                             f"got shape {pts.shape}")
+    if len(pts) < 3:
+        raise InputFileError(f"{name}: only {len(pts)} node{'s' if len(pts) != 1 else ''}; "
+                             f"a shape needs at least 3")
+    if faces is not None and pts.shape[1] != 3:
+        raise InputFileError(f"{name}: has triangles but {pts.shape[1]}D points; triangles "
+                             f"describe 3D surfaces (give a 2D contour without faces)")
+    bad = np.flatnonzero(~np.isfinite(pts).all(axis=1))
+    if len(bad):
+        raise InputFileError(f"{name}: node {bad[0]} has non-finite coordinates "
+                             f"{pts[bad[0]].tolist()} ({len(bad)} such node(s))")
+    if nodes is not None:
+        if pts.shape[1] != 2 or faces is not None:
+            raise InputFileError(f"{name}: nodes= resamples 2D contours; this is a "
+                                 f"{pts.shape[1]}D "
+                                 f"{'surface' if faces is not None else 'point set'}")
+        pts = resample(pts, int(nodes), closed=bool(closed))
+    try:
+        return Shape(pts, closed=bool(closed), faces=faces, frame=frame)
+    except ValueError as exc:
+        raise InputFileError(f"{name}: {exc}") from None

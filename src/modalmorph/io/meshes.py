@@ -1,0 +1,128 @@
+"""Meshes, read with meshio: a 3D triangle surface or, with no surface cells, a point cloud.
+
+Quads and polygons are split into triangles (a fan from their first corner); points no
+triangle uses and exactly repeated points are dropped, and so are the triangles that
+become degenerate. A mesh with no surface cells is a point cloud of all its points.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from contextlib import redirect_stderr, redirect_stdout
+from io import StringIO
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputFileError
+from ..options import ReadOptions
+from .base import RawShape
+
+__all__ = ["read_mesh"]
+
+
+def read_mesh(path: Path, name: str, options: ReadOptions) -> RawShape:
+    """A mesh file's triangle surface, or its points (see the module's docstring); its
+    points are never closed and kept as they are (no closing repeat dropped)."""
+    try:
+        import meshio
+    except ImportError as exc:
+        raise ImportError(f"reading meshes needs meshio ({exc}); install it with: "
+                          f"pip install 'modalmorph[mesh]'") from None
+    _check_mesh_header(path.read_bytes(), name, path.suffix.lower())
+    mesh = _meshio_read(meshio, path, name)
+    points = np.asarray(mesh.points, dtype=np.float64)
+    triangles = _triangles(mesh)
+    if points.ndim != 2 or len(points) == 0:
+        raise InputFileError(f"{name}: the mesh has no points")
+    if not triangles:  # no surface: a point cloud
+        return RawShape(points, closed=False, drop_closing_repeat=False)
+    points, faces = _surface(points, np.vstack(triangles).astype(np.intp), name)
+    return RawShape(points, faces=faces, closed=False, drop_closing_repeat=False)
+
+
+def _meshio_read(meshio, path: Path, name: str):
+    """``meshio.read(path)``, its failures and its printed diagnostics named."""
+    # meshio prints its diagnostics and calls sys.exit() when no reader succeeds; its STL
+    # reader overflows a uint32 on purpose while guessing ASCII from binary.
+    said = StringIO()
+    try:
+        with redirect_stdout(said), redirect_stderr(said), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mesh = meshio.read(path)
+    except (Exception, SystemExit) as exc:  # meshio raises many types for a bad file
+        printed = " ".join(said.getvalue().split())
+        detail = printed if isinstance(exc, SystemExit) else f"{type(exc).__name__}: {exc}" + (
+            f" (meshio: {printed})" if printed else "")
+        raise InputFileError(f"{name}: cannot read the mesh: {detail}") from None
+    if said.getvalue().strip():
+        warnings.warn(f"{name}: meshio: {' '.join(said.getvalue().split())}", stacklevel=4)
+    return mesh
+
+
+def _triangles(mesh) -> list:
+    """The (f, 3) triangles of each surface block: quads and polygons split in fans."""
+    triangles = []
+    for block in mesh.cells:
+        cells = np.asarray(block.data)
+        if block.type.startswith(("triangle", "quad", "polygon")) and cells.ndim == 2 and (
+                cells.size):
+            corners = {"triangle": 3, "quad": 4}.get(block.type.rstrip("0123456789"))
+            cells = cells[:, :corners] if corners else cells  # drop higher-order nodes
+            for k in range(1, cells.shape[1] - 1):  # fan: (0, k, k + 1)
+                triangles.append(cells[:, [0, k, k + 1]])
+    return triangles
+
+
+def _surface(points: np.ndarray, faces: np.ndarray, name: str):
+    """(points, faces) of a surface: unreferenced points, repeated points and degenerate
+    triangles dropped."""
+    if faces.min() < 0 or faces.max() >= len(points):
+        raise InputFileError(f"{name}: triangles refer to points outside "
+                             f"0..{len(points) - 1}")
+    used = np.unique(faces)
+    points, faces = points[used], np.searchsorted(used, faces)  # drop unreferenced points
+    points, inverse = np.unique(points, axis=0, return_inverse=True)  # merge repeated points
+    faces = inverse.reshape(-1)[faces]
+    degenerate = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (
+        faces[:, 0] == faces[:, 2])
+    faces = faces[~degenerate]
+    if len(faces) == 0:
+        raise InputFileError(f"{name}: every triangle of the mesh is degenerate")
+    used = np.unique(faces)
+    return points[used], np.searchsorted(used, faces)
+
+
+def _check_mesh_header(data: bytes, name: str, ext: str) -> None:
+    """Refuse what meshio would loop on (header-only and truncated OFF, PLY and ANSYS files)
+    or allocate for: element counts the file's size cannot hold."""
+    if ext == ".off":
+        lines = [ln.split(b"#")[0].split() for ln in data.splitlines()]
+        lines = [ln for ln in lines if ln]
+        head = lines[0][0].decode("latin-1") if lines else ""
+        inline = len(lines[0]) > 1 if lines else False  # "OFF nv nf ne" on one line
+        counts = lines[0][1:] if inline else (lines[1] if len(lines) > 1 else [])
+        if not head.endswith("OFF") or len(counts) < 2 or not all(
+                c.lstrip(b"-").isdigit() for c in counts[:2]):
+            raise InputFileError(f"{name}: cannot read the mesh: not an OFF file: it must start "
+                                 f"with 'OFF' and the numbers of vertices and faces")
+        nv, nf = int(counts[0]), int(counts[1])
+        body = len(lines) - (1 if inline else 2)
+        if nv < 0 or nf < 0 or nv + nf > body:
+            raise InputFileError(f"{name}: cannot read the mesh: the OFF header announces {nv} "
+                                 f"vertices and {nf} faces but {body} line(s) follow")
+    elif ext == ".ply":
+        end = data.find(b"end_header")
+        if not data.startswith(b"ply") or end < 0:
+            raise InputFileError(f"{name}: cannot read the mesh: not a PLY file: it must start "
+                                 f"with 'ply' and have an 'end_header' line")
+        counts = [int(c) for c in re.findall(rb"^element\s+\S+\s+(-?\d+)", data[:end], re.M)]
+        left = len(data) - end - len(b"end_header")
+        if any(c < 0 for c in counts) or sum(counts) > left:
+            raise InputFileError(f"{name}: cannot read the mesh: the PLY header announces "
+                                 f"{sum(counts)} elements but only {left} bytes follow it")
+    elif ext == ".msh" and data.lstrip()[:1] == b"(" and data.rstrip()[-1:] != b")":
+        raise InputFileError(f"{name}: cannot read the mesh: a truncated ANSYS mesh (it does not "
+                             f"end with ')')")
+

@@ -1,0 +1,280 @@
+"""Point files: text (CSV, TSV, TXT), NumPy (NPY, NPZ) and JSON, read and written.
+
+- text: one node per line, ``x, y`` or ``x, y, z``, separated by commas, tabs, semicolons
+  or spaces (with semicolons a decimal comma is accepted). An optional first line of
+  column names; if it names columns ``x`` and ``y`` (and ``z``), those columns are used
+  and others ignored. Blank lines and lines starting with ``#`` are skipped.
+- ``.npy``: an (m, 2) or (m, 3) array; ``.npz``: the array ``points`` (or the only array
+  in the file), and optionally ``faces`` and ``closed``.
+- ``.json``: a list ``[[x, y], ...]`` or an object ``{"points": [...], "closed": bool,
+  "faces": [[i, j, k], ...]}`` (``closed`` and ``faces`` optional).
+
+:func:`write_points` writes the same formats back, exactly.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from ..core.shape import Shape
+from ..errors import InputFileError, ShapeError
+from ..options import ReadOptions
+from .atomic import atomic_write
+from .base import RawShape
+
+__all__ = ["TEXT_SEPARATORS", "WRITABLE", "load_npy", "npz_arrays", "parse_float",
+           "read_json", "read_npy", "read_npz", "read_text", "write_points"]
+
+# The text formats written, with their column separator (any is read).
+TEXT_SEPARATORS = {".csv": ",", ".tsv": "\t", ".txt": " "}
+WRITABLE = (*TEXT_SEPARATORS, ".npy", ".npz", ".json")
+
+
+def parse_float(text: str) -> float:
+    return float(text.strip().strip("\"'"))
+
+
+def read_text(path: Path, name: str, options: ReadOptions) -> RawShape:
+    """A text file's nodes (see the module's docstring)."""
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise InputFileError(f"{name}: not a text file (cannot decode it as UTF-8: "
+                             f"{exc.reason} at byte {exc.start})") from None
+    lines = [(i, line.strip()) for i, line in enumerate(text.splitlines(), start=1)]
+    lines = [(i, line) for i, line in lines if line and not line.startswith("#")]
+    if not lines:
+        raise InputFileError(f"{name}: the file has no data")
+
+    first = lines[0][1]
+    sep = next((s for s in ("\t", ";", ",") if s in first), None)
+
+    def fields(line):
+        parts = line.split(sep) if sep else line.split()
+        parts = [p.strip() for p in parts]
+        return [p.replace(",", ".") for p in parts] if sep == ";" else parts
+
+    columns = None  # indices of x, y[, z] when a header names them
+    header_line, header = lines[0][0], fields(first)
+    if not any(_is_number(f) for f in header):
+        lines = lines[1:]
+        if not lines:
+            raise InputFileError(f"{name}: the file has a header line but no data")
+        names = [h.strip("\"'").strip().lower() for h in header]
+        if "x" in names and "y" in names:
+            columns = [names.index(c) for c in ("x", "y", "z") if c in names]
+        elif len(names) not in (2, 3):
+            raise InputFileError(f"{name}: line {header_line} (header) has {len(names)} "
+                                 f"columns, expected 2 or 3 (x, y[, z])")
+
+    rows, width = [], None
+    for lineno, line in lines:
+        parts = fields(line)
+        if width is None:
+            width = len(parts)
+            if columns is None and width not in (2, 3):
+                raise InputFileError(f"{name}: line {lineno} has {width} column"
+                                     f"{'s' if width != 1 else ''}, expected 2 or 3 (x, y[, z])")
+        elif len(parts) != width:
+            raise InputFileError(f"{name}: line {lineno} has {len(parts)} columns, expected "
+                                 f"{width} like line {lines[0][0]}")
+        if columns is not None and max(columns) >= len(parts):
+            raise InputFileError(f"{name}: line {lineno} has {len(parts)} columns, fewer than "
+                                 f"the header names")
+        row = []
+        for k in columns if columns is not None else range(len(parts)):
+            try:
+                value = parse_float(parts[k])
+            except ValueError:
+                raise InputFileError(f"{name}: line {lineno}: {parts[k]!r} in column {k + 1} is "
+                                     f"not a number") from None
+            row.append(value)
+        if not all(math.isfinite(v) for v in row):
+            raise InputFileError(f"{name}: line {lineno}: non-finite coordinates "
+                                 f"({', '.join(parts)})")
+        rows.append(row)
+    return RawShape(np.array(rows, dtype=np.float64))
+
+
+def _is_number(text: str) -> bool:
+    try:
+        parse_float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _load_array(loader, path: Path, name: str, kind: str):
+    try:
+        return loader(path)
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
+        raise InputFileError(f"{name}: cannot read it as a {kind} file: {exc}") from None
+
+
+def _numeric(name: str, array, what: str) -> np.ndarray:
+    array = np.asarray(array)
+    if array.dtype.kind not in "iuf":
+        raise InputFileError(f"{name}: {what} must be numeric, got an array of dtype "
+                             f"{array.dtype}")
+    if array.ndim != 2 or array.shape[1] not in (2, 3):
+        got = "a scalar" if array.ndim == 0 else f"shape {array.shape}"
+        raise InputFileError(f"{name}: {what} must have shape (m, 2) or (m, 3), got {got}")
+    return array
+
+
+def load_npy(path: Path, name: str) -> np.ndarray:
+    def load(p):
+        with open(p, "rb") as fh:  # np.load(path) leaks its handle when the file is bad
+            return np.load(fh, allow_pickle=False)
+
+    return _load_array(load, path, name, ".npy")
+
+
+def read_npy(path: Path, name: str, options: ReadOptions) -> RawShape:
+    """An .npy file's (m, d) array."""
+    return RawShape(_numeric(name, load_npy(path, name), "the array"))
+
+
+def read_npz(path: Path, name: str, options: ReadOptions) -> RawShape:
+    """An .npz file's ``points`` (or only) array, its ``faces`` and ``closed``."""
+    points, faces, closed = npz_arrays(path, name)
+    return RawShape(_numeric(name, points, "'points'"), faces=faces, closed=closed)
+
+
+def npz_arrays(path: Path, name: str):
+    """An .npz file's ``points`` (or only) array as it is, its ``faces`` and ``closed``."""
+    def load(p):
+        with open(p, "rb") as fh, np.load(fh, allow_pickle=False) as data:
+            return {key: data[key] for key in data.files}
+
+    arrays = _load_array(load, path, name, ".npz")
+    if "points" in arrays:
+        points = arrays["points"]
+    elif len(arrays) == 1:
+        points = next(iter(arrays.values()))
+    else:
+        raise InputFileError(f"{name}: no array named 'points' among {sorted(arrays)}")
+    faces = arrays.get("faces") if "points" in arrays else None
+    closed = arrays.get("closed") if "points" in arrays else None
+    if closed is not None:
+        if closed.shape != () or closed.dtype.kind not in "biu":
+            raise InputFileError(f"{name}: 'closed' must be one boolean, got {closed.dtype} "
+                                 f"{closed.shape}")
+        closed = bool(closed)
+    if faces is not None:
+        faces = _faces(name, faces)
+    return points, faces, closed
+
+
+def _faces(name: str, faces) -> np.ndarray:
+    try:
+        faces = np.asarray(faces)
+    except (ValueError, OverflowError):  # ragged lists, integers beyond int64
+        faces = np.asarray(faces, dtype=object)
+    if faces.size == 0:
+        return None
+    if faces.ndim != 2 or faces.shape[1] != 3 or faces.dtype.kind not in "iu":
+        raise InputFileError(f"{name}: faces must be integer triangles of shape (f, 3), got "
+                             f"{faces.dtype} {faces.shape}")
+    return faces
+
+
+def read_json(path: Path, name: str, options: ReadOptions) -> RawShape:
+    """A JSON list of nodes, or an object with ``points``, ``closed`` and ``faces``."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8-sig"))
+    except UnicodeDecodeError as exc:
+        raise InputFileError(f"{name}: not a text file (cannot decode it as UTF-8: "
+                             f"{exc.reason} at byte {exc.start})") from None
+    except ValueError as exc:  # JSONDecodeError, or an integer of more than 4300 digits
+        raise InputFileError(f"{name}: not valid JSON: {exc}") from None
+    except RecursionError:
+        raise InputFileError(f"{name}: not readable JSON: nested too deeply") from None
+    closed = faces = None
+    if isinstance(data, dict):
+        if "points" not in data:
+            raise InputFileError(f"{name}: the JSON object has no \"points\" (keys: "
+                                 f"{', '.join(map(repr, data))})")
+        closed = data.get("closed")
+        if closed is not None and not isinstance(closed, bool):
+            raise InputFileError(f"{name}: \"closed\" must be true or false, got {closed!r}")
+        if data.get("faces") is not None:
+            faces = _faces(name, data["faces"])
+        data = data["points"]
+    if not isinstance(data, list) or not all(isinstance(row, list) for row in data):
+        raise InputFileError(f"{name}: expected a list of [x, y] or [x, y, z] lists")
+    if not data:
+        raise InputFileError(f"{name}: no points (an empty list)")
+    if len({len(row) for row in data}) > 1:
+        first = len(data[0])
+        k = next(k for k, row in enumerate(data) if len(row) != first)
+        raise InputFileError(f"{name}: node {k} has {len(data[k])} coordinates, expected {first} "
+                             f"like node 0")
+    for k, row in enumerate(data):
+        for value in row:
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise InputFileError(f"{name}: node {k}: {str(value)[:40]!r} is not a number")
+            if isinstance(value, int) and not -1e308 < value < 1e308:
+                raise InputFileError(f"{name}: node {k}: an integer of {len(str(value))} digits "
+                                     f"is too large for a coordinate")
+    return RawShape(np.array(data, dtype=np.float64), faces=faces, closed=closed)
+
+
+def write_points(path, points) -> None:
+    """Write nodes to a file, the format chosen by its extension, atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.csv`` (header ``x,y`` or ``x,y,z``), ``.tsv`` (tab-separated, same header),
+        ``.txt`` (space-separated, same header), ``.npy`` (the array), ``.npz`` (array
+        ``points``, plus ``faces`` and ``closed`` for a :class:`Shape`) or ``.json``
+        (``{"points": [[x, y], ...]}``, plus ``"closed"`` and ``"faces"`` for a
+        :class:`Shape`). Numbers are written exactly (shortest round-trip form).
+    points : array_like, shape (m, 2) or (m, 3), or Shape
+
+    Raises
+    ------
+    ValueError
+        If the extension is not one of these.
+    ShapeError
+        If points do not have shape (m, 2) or (m, 3).
+    """
+    name = os.fspath(path)
+    path = Path(path)
+    shape = points if isinstance(points, Shape) else None
+    pts = np.asarray(shape.points if shape is not None else points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] not in (2, 3):
+        raise ShapeError(f"points must have shape (m, 2) or (m, 3), got {pts.shape}")
+    ext = path.suffix.lower()
+    if ext not in WRITABLE:
+        raise ValueError(f"{name}: cannot write {path.suffix!r} files; supported: "
+                         f"{', '.join(WRITABLE)}")
+    with atomic_write(path) as tmp:
+        if ext in TEXT_SEPARATORS:
+            sep = TEXT_SEPARATORS[ext]
+            header = sep.join("xyz"[: pts.shape[1]])
+            body = "".join(sep.join(repr(float(v)) for v in row) + "\n" for row in pts)
+            tmp.write_text(header + "\n" + body, encoding="utf-8")
+        elif ext == ".npy":
+            np.save(tmp, pts)
+        elif ext == ".npz":
+            extra = {}
+            if shape is not None:
+                extra["closed"] = np.bool_(shape.closed)
+                if shape.faces is not None:
+                    extra["faces"] = shape.faces
+            np.savez(tmp, points=pts, **extra)
+        else:
+            data = {"points": pts.tolist()}
+            if shape is not None:
+                data["closed"] = bool(shape.closed)
+                if shape.faces is not None:
+                    data["faces"] = shape.faces.tolist()
+            tmp.write_text(json.dumps(data) + "\n", encoding="utf-8")

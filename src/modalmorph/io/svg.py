@@ -1,0 +1,100 @@
+"""SVG drawings: the first outline drawn, sampled uniformly by arc length.
+
+The first ``<path>``, ``<polygon>``, ``<polyline>``, ``<circle>``, ``<ellipse>`` or
+``<rect>`` drawn (not in ``<defs>``; transforms applied; for a path with several subpaths,
+the first), read with svgelements. Closed if it ends with ``Z``, is a polygon, circle,
+ellipse or rect, or ends where it starts. Coordinates are the file's user units (before
+any ``viewBox`` scaling), y pointing down (:data:`SVG_FRAME`).
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from ..core.shape import ImageFrame
+from ..errors import InputFileError
+from ..options import ReadOptions
+from .base import DEFAULT_NODES, RawShape
+
+__all__ = ["SVG_FRAME", "SVG_SAMPLES", "read_svg"]
+
+# Points per segment when an SVG segment is flattened before arc-length resampling; the
+# chord error of a quarter circle sampled this finely is below 1e-4 of its radius.
+SVG_SAMPLES = 128
+
+# SVG coordinates are the file's user units, y pointing down (no image to draw under them).
+SVG_FRAME = ImageFrame(unit="SVG user units")
+
+
+# The outlines read from an SVG, in document order; svgelements gives <circle>, <ellipse>
+# and <rect> as paths too.
+_SVG_TAGS = ("path", "polygon", "polyline", "circle", "ellipse", "rect")
+
+
+def read_svg(path: Path, name: str, options: ReadOptions) -> RawShape:
+    """The first outline drawn in an SVG file (see the module's docstring)."""
+    try:
+        import svgelements as se
+    except ImportError:
+        raise ImportError("reading SVG needs svgelements: pip install 'modalmorph[images]'"
+                          ) from None
+    try:
+        svg = se.SVG.parse(os.fspath(path))
+    except (ET.ParseError, ValueError) as exc:
+        raise InputFileError(f"{name}: not a valid SVG (XML) file: {exc}") from None
+    if not isinstance(svg, se.SVG):
+        raise InputFileError(f"{name}: not an SVG file (its root element is not <svg>)")
+    kinds = tuple(getattr(se, tag.capitalize()) for tag in _SVG_TAGS)
+    element = next((e for e in svg.elements() if isinstance(e, kinds)), None)  # not <defs>
+    if element is None:
+        raise InputFileError(f"{name}: no {', '.join(f'<{t}>' for t in _SVG_TAGS[:-1])} or "
+                             f"<{_SVG_TAGS[-1]}> element")
+    tag = type(element).__name__.lower()
+    _check_svg_source(se, element, f"{name}: <{tag}>")
+    if svg.viewbox is not None:  # back from the viewport to the file's user units
+        element = element * ~se.Matrix(svg.viewbox_transform)
+    drawn = [list(sub) for sub in abs(se.Path(element)).as_subpaths()]  # transforms applied
+    drawn = [segs for segs in drawn if len(segs) > 1]
+    if not drawn:
+        raise InputFileError(f"{name}: the first <{tag}> has no segments")
+    if len(drawn) > 1:
+        warnings.warn(f"{name}: the <{tag}> has {len(drawn)} subpaths; using the first",
+                      stacklevel=3)
+    segments = drawn[0]
+    t = np.linspace(0.0, 1.0, SVG_SAMPLES + 1)[1:]
+    pts = np.vstack([np.array(segments[0].end)[None]]
+                    + [seg.npoint(t) for seg in segments[1:]])
+    closed = isinstance(segments[-1], se.Close)
+    keep = np.r_[True, np.any(np.diff(pts, axis=0) != 0, axis=1)]
+    pts = pts[keep]  # zero-length segments add nothing to the outline
+    if len(pts) > 1 and np.allclose(pts[0], pts[-1], rtol=0, atol=1e-12 * np.abs(pts).max()):
+        pts, closed = pts[:-1], True  # ends where it starts
+    return RawShape(pts, closed=closed, frame=SVG_FRAME, default_nodes=DEFAULT_NODES)
+
+
+def _check_svg_source(se, element, where: str) -> None:
+    """Raise for what svgelements, like a browser, skips: bad path data, points, transforms."""
+    d = element.values.get("d")
+    if d is not None:
+        lexer = se.SVGLexicalParser()
+        try:
+            lexer.parse(se.Path(), d)
+            ok = not d[lexer.pos:].strip(" \t\r\n,")
+        except ValueError:
+            ok = False
+        if not ok:
+            raise InputFileError(f"{where}: malformed path data at character {lexer.pos} of d: "
+                                 f"{d[lexer.pos:lexer.pos + 10] or 'the end'!r}")
+        if d.strip()[:1] not in ("M", "m"):
+            raise InputFileError(f"{where}: path data must start with M or m, got {d[:20]!r}")
+    for attr, grammar in (("points", se.REGEX_COORD_PAIR),
+                          ("transform", se.REGEX_TRANSFORM_TEMPLATE)):
+        rest = grammar.sub(" ", element.values.get(attr, "").lower()).strip(" \t\r\n,")
+        if rest:
+            raise InputFileError(f"{where}: cannot read {rest[:20]!r} in {attr!r}")
+
