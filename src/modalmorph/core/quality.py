@@ -249,9 +249,9 @@ def check_simple(points, name: str, closed: bool = True) -> None:
     m, scale = len(p), np.mean(np.sum((p - p.mean(axis=0)) ** 2, axis=1))
     for i, j in crossing_segments(p, closed):
         a, b, c, e = p[i], p[(i + 1) % m], p[j], p[(j + 1) % m]
-        u = b - a
-        s = ((c[0] - a[0]) * (e[1] - c[1]) - (c[1] - a[1]) * (e[0] - c[0])) / (
-            u[0] * (e[1] - c[1]) - u[1] * (e[0] - c[0]))
+        u, den = b - a, (b[0] - a[0]) * (e[1] - c[1]) - (b[1] - a[1]) * (e[0] - c[0])
+        s = ((c[0] - a[0]) * (e[1] - c[1]) - (c[1] - a[1]) * (e[0] - c[0])) / den \
+            if den else 0.5  # den = 0: nearly collinear nodes of a flat outline
         x = a + s * u  # where segments i and j cross
         inside = np.vstack([x, p[i + 1:j + 1]])
         outside = np.vstack([x, p[j + 1:], p[:i + 1]])
