@@ -19,6 +19,7 @@ import signal
 import threading
 import time
 from collections.abc import Callable, Iterable
+from concurrent.futures import CancelledError
 from dataclasses import dataclass
 from multiprocessing.connection import wait as wait_for
 
@@ -289,6 +290,8 @@ class _DaskRunner:
                                        return_when="FIRST_COMPLETED")
                 except TimeoutError:
                     finished = ()
+                except CancelledError:  # the scheduler went away with them
+                    finished = [f for f in pending if f.status == "cancelled"]
                 unreachable = self._check(unreachable)
                 for future in finished:
                     self._finished(future, pending.pop(future), done)
@@ -308,12 +311,22 @@ class _DaskRunner:
     def _finished(self, future, item, done: Done) -> None:
         if future.status == "cancelled" and self.client.status != "running":
             raise SchedulerLost(f"the Dask scheduler {self.client.scheduler.address} "
-                                    f"was lost")
+                                f"was lost")
         try:
             row = future.result()
-        except Exception as exc:  # KilledWorker (the item killed 3 workers), ...
-            row = failed_row(item, exc)
+        except Exception as exc:  # never the item's own error: run_item does not raise
+            if self._losing():
+                raise SchedulerLost(f"the Dask scheduler {self.client.scheduler.address} "
+                                    f"was lost") from None
+            row = failed_row(item, exc)  # KilledWorker: the item killed 3 workers
         done(item, row)
+
+    def _losing(self) -> bool:
+        """Whether the client loses its scheduler (it says so within a second)."""
+        deadline = time.monotonic() + 2.0
+        while self.client.status == "running" and time.monotonic() < deadline:
+            time.sleep(0.05)
+        return self.client.status != "running"
 
 
 def _has_dashboard(client) -> bool:

@@ -203,7 +203,7 @@ class Resume:
             return ("redone: inputs changed" + (f" ({', '.join(changed[:_NAMED_CHANGES])})"
                                                 if changed else " (number of files)"))
         wanted, old = self._record(item), data.get("options") or {}
-        changes = [f"{k} {old.get(k)!r} -> {v!r}" for k, v in wanted.items()
+        changes = [f"{k} {_text(old.get(k))} -> {_text(v)}" for k, v in wanted.items()
                    if old.get(k) != v]
         if not changes:
             return None
@@ -223,6 +223,10 @@ class Resume:
             self._records[key] = ({"": None} if own is None
                                   else json.loads(json.dumps(own.record(classes))))
         return self._records[key]
+
+
+def _text(value) -> str:
+    return f"{value:g}" if isinstance(value, float) else repr(value)
 
 
 def summary_row(item: Item, out: Path, outcome: Outcome | None, since: float,
