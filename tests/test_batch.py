@@ -1,5 +1,7 @@
 """Batches: pairs and a sequence on a Dask LocalCluster and on the process pool, one bad
-item, resume after a finished run and after a SIGKILL midway."""
+item, resume after a finished run and after a SIGKILL midway; resume that redoes changed
+items, Ctrl-C, workers that die with their batch, and a scheduler and two workers started
+with Dask's own command line on 127.0.0.1 (one worker killed; the scheduler killed)."""
 
 import json
 import os
@@ -414,10 +416,10 @@ def test_scheduler_and_workers_started_apart_one_worker_killed(cluster, tmp_path
 
 
 def test_scheduler_gone_one_line_and_exit_4(cluster, tmp_path):
+    """The scheduler killed mid-batch: one line, exit code 4, the finished items kept."""
     address, scheduler, _ = cluster
     out = tmp_path / "out"
-    proc = _batch(["batch", _hearts(tmp_path, 30), "--out", out, "--scheduler", address,
-                   "-q"])
+    proc = _batch(["batch", _hearts(tmp_path, 30), "--out", out, "--scheduler", address])
     try:
         _wait(lambda: out.is_dir() and _complete(out), "finished item", proc)
         os.killpg(scheduler.pid, signal.SIGKILL)
@@ -426,12 +428,29 @@ def test_scheduler_gone_one_line_and_exit_4(cluster, tmp_path):
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
     assert proc.returncode == 4, err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith(
-        f"modalmorph: error: the Dask scheduler {address}"), err
+    lines = err.strip().splitlines()  # quiet without -v: no Dask log line, no traceback
+    assert lines[:2] == ["30 of 30 items to compute, 0 complete in " + str(out),
+                         f"engine: Dask scheduler {address}"], err
+    assert lines[2].startswith("30 items: ") and len(lines) == 4, err
+    assert lines[3].startswith(f"modalmorph: error: the Dask scheduler {address}"), err
     done, statuses = _complete(out), _statuses(out)
     ok = {k for k, s in statuses.items() if s == "ok"}
     assert 1 <= len(ok) < 30 and set(statuses.values()) == {"ok", "interrupted"}
     # the workers may still finish the items they held, after the batch ended
     assert ok <= done and len(done - ok) <= 2
     assert not [p for p in out.iterdir() if p.name.startswith(".summary")]
+
+
+def test_one_progress_bar_with_failed_rate_and_eta(data, tmp_path, monkeypatch):
+    import io
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    monkeypatch.setattr(sys, "stderr", Terminal())
+    (data / "m3.csv").write_text("\n".join((data / "m.csv").read_text().splitlines()[:4]))
+    assert main(["batch", str(data / "m3.csv"), "--out", str(tmp_path / "out"),
+                 "--engine", "processes", "--workers", "1"]) == 1
+    text = sys.stderr.getvalue()
+    assert "3/3" in text and "1 failed" in text and "items/min" in text and "ETA" in text

@@ -265,9 +265,9 @@ def _pool_runner(workers: int):
 class _DaskRunner:
     """Items as Dask tasks, two per worker thread in flight."""
 
-    def __init__(self, client, name: str):
+    def __init__(self, client, name: str, *, local: bool = False):
         self.client, self.name = client, name
-        self.dashboard = client.dashboard_link if _has_dashboard(client) else None
+        self.dashboard = client.dashboard_link if local else None
 
     def run(self, items: Iterable, task: dict, done: Done) -> None:
         """As :meth:`_Pool.run`; raises :class:`SchedulerLost`."""
@@ -329,13 +329,6 @@ class _DaskRunner:
         return self.client.status != "running"
 
 
-def _has_dashboard(client) -> bool:
-    try:
-        return bool(client.scheduler_info().get("services", {}).get("dashboard"))
-    except Exception:  # noqa: BLE001 - no dashboard to show
-        return False
-
-
 @contextlib.contextmanager
 def _dask_runner(client, scheduler, workers):
     try:
@@ -356,7 +349,7 @@ def _dask_runner(client, scheduler, workers):
         client = _local_client(workers)
         name = f"Dask LocalCluster, {workers} worker{'s' * (workers > 1)}"
     try:
-        yield _DaskRunner(client, name)
+        yield _DaskRunner(client, name, local=scheduler is None)
     finally:
         _close(client)
 
@@ -365,7 +358,8 @@ def _local_client(workers: int):
     import dask
     from distributed import Client, LocalCluster
 
-    quiet = logging.getLogger("distributed").getEffectiveLevel()
+    # the workers log at Dask's default (warnings) or what the command line set (-v or not)
+    quiet = max(logging.getLogger("distributed").getEffectiveLevel(), logging.WARNING)
     with dask.config.set(_DASK_CONFIG), _no_sigint():  # read as the workers are spawned
         # a free port for the dashboard: several batches may run on one machine
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,

@@ -21,6 +21,7 @@ from ..runs import (
     PAIR_CLASSES,
     SEQUENCE_CLASSES,
     Settings,
+    file_record,
     input_records,
     morph_files,
     track_files,
@@ -34,6 +35,8 @@ __all__ = ["ItemResult", "Outcome", "Resume", "RESULT_FILE", "STAGING_SUFFIX", "
 RESULT_FILE = {"pair": "result.json", "sequence": "track.json"}
 # Hidden staging folders: OUT/.<id>.<attempt>.partial, one per attempt of an item.
 STAGING_SUFFIX = ".partial"
+# Input files whose SHA-256 is kept while a batch is planned (shared by many items).
+_FILES_KEPT = 4096
 # Option differences named in a redone item's note (the rest counted).
 _NAMED_CHANGES = 3
 
@@ -176,6 +179,7 @@ class Resume:
         self.out, self.settings, self.figures = out, settings, figures
         self.force, self.keep_stale = force, keep_stale
         self._records: dict[str, dict] = {}
+        self._files: dict[tuple, dict] = {}
 
     def why_redo(self, item: Item) -> str | None:
         """``None``: skip the item; ``""``: compute it (nothing on disk); else why it is
@@ -195,7 +199,7 @@ class Resume:
 
     def _difference(self, item: Item, data: dict) -> str | None:
         files = (input_records(list(item.frames)) if item.frames
-                 else input_records([item.source, item.target]))
+                 else [self._file(item.source), self._file(item.target)])
         recorded = data.get("input_files" if item.frames else "inputs") or []
         if [r["sha256"] for r in files] != [r.get("sha256") for r in recorded]:
             changed = [Path(r["path"]).name for r, old in zip(files, recorded, strict=False)
@@ -210,6 +214,19 @@ class Resume:
         more = len(changes) - _NAMED_CHANGES
         return ("redone: options changed (" + ", ".join(changes[:_NAMED_CHANGES])
                 + (f", {more} more" if more > 0 else "") + ")")
+
+    def _file(self, path: str) -> dict:
+        """:func:`file_record` of a file, hashed once while its size and time stay."""
+        try:
+            stat = os.stat(path)
+        except OSError:
+            return file_record(path)
+        key = (path, stat.st_size, stat.st_mtime_ns)
+        if key not in self._files:
+            if len(self._files) >= _FILES_KEPT:
+                self._files.clear()
+            self._files[key] = file_record(path)
+        return self._files[key]
 
     def _record(self, item: Item) -> dict:
         """The options ``result.json`` records for the item as JSON reads them back."""

@@ -7,6 +7,7 @@ track`` (a sequence of frames) with its own options; :func:`read_manifest` reads
 from __future__ import annotations
 
 import csv
+import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,6 +17,9 @@ from ..runs import BATCH_CLASSES, Settings
 __all__ = ["Item", "read_manifest"]
 
 _PATH_KEYS = ("id", "source", "target", "frames")
+# Option sets of items found valid (checking one costs 0.8 ms: 0.8 s for 1 000 items).
+_VALID_OPTIONS: set[str] = set()
+_VALID_OPTIONS_KEPT = 4096
 
 
 @dataclass(frozen=True)
@@ -52,7 +56,12 @@ class Item:
         if pair == bool(self.frames) or (not pair and (self.source or self.target)):
             raise ValueError(f"item {self.id!r}: give either source and target (a pair) "
                              f"or frames (a sequence)")
-        self.settings(Settings())  # refuses unknown names and invalid values
+        key = json.dumps(self.options, sort_keys=True, default=repr)
+        if key not in _VALID_OPTIONS:  # the same options are checked once (long manifests)
+            self.settings(Settings())  # refuses unknown names and invalid values
+            if len(_VALID_OPTIONS) >= _VALID_OPTIONS_KEPT:
+                _VALID_OPTIONS.clear()
+            _VALID_OPTIONS.add(key)
 
     def settings(self, batch: Settings) -> Settings:
         """The batch's settings with this item's options over them."""

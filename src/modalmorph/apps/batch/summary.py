@@ -7,7 +7,7 @@ from __future__ import annotations
 import csv
 import typing
 from collections.abc import Iterable, Iterator
-from dataclasses import astuple, fields
+from dataclasses import fields
 from pathlib import Path
 
 from ...figures import plot_batch
@@ -30,7 +30,8 @@ def write_summary(results: Iterable[ItemResult], out, *, figure: bool = False) -
     with atomic_write(written[0]) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
         writer = csv.writer(fh)
         writer.writerow(COLUMNS)
-        writer.writerows(["" if v is None else v for v in astuple(row)] for row in results)
+        writer.writerows(["" if (v := getattr(row, c)) is None else v for c in COLUMNS]
+                        for row in results)
     parquet = _write_parquet(written[0], out / "summary.parquet")
     if parquet is not None:
         written.append(parquet)
