@@ -326,7 +326,8 @@ def test_ctrl_c_stops_at_once_and_the_summary_marks_the_unfinished(tmp_path):
                                         if l.startswith("modalmorph: interrupted")]
     assert len(err.strip().splitlines()) == 1, err
     done = _complete(out)
-    assert all(not w.is_running() or w.status() == "zombie" for w in workers)
+    _wait(lambda: not any(w.is_running() and w.status() != "zombie" for w in workers),
+          "end of the workers (and multiprocessing's resource tracker)", seconds=10)
     statuses = _statuses(out)
     assert {k for k, s in statuses.items() if s == "ok"} == done
     assert {k for k, s in statuses.items() if s == "interrupted"} == \

@@ -43,12 +43,13 @@ _ONE_THREAD = {name: "1" for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
 _DASK_CONFIG = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
                 "distributed.worker.profile.enabled": False}
 # The engine "auto" picks, on this machine, the one that ends the batch first: start-up
-# plus the items' cost per worker. Measured with benchmarks/batch.py (2 workers, heart
-# pairs, 2-core machine): start until the first item is back, and CPU per item.
-POOL_START_S = 1.3  # spawn 2 workers that import modalmorph
-CLUSTER_START_S = 3.1  # LocalCluster of 2 nannies + workers, import modalmorph there
-POOL_ITEM_S = 0.144  # CPU s per heart pair in the pool (README's table)
-CLUSTER_ITEM_S = 0.153  # CPU s per heart pair on the LocalCluster (scheduler included)
+# plus the items' cost per worker. Measured with benchmarks/batch.py --pairs 40 --startup
+# (2 workers, heart pairs, a 2-core machine shared with other jobs, load average ~10):
+# a 2-item batch from start to end, and the CPU per item (this process and its workers).
+POOL_START_S = 5.8  # spawn 2 workers that import modalmorph, 2 items
+CLUSTER_START_S = 6.8  # LocalCluster of 2 nannies + workers, import modalmorph there
+POOL_ITEM_S = 0.162  # CPU s per heart pair in the pool
+CLUSTER_ITEM_S = 0.223  # CPU s per heart pair on the LocalCluster (scheduler included)
 # A scheduler that stays unreachable this long is lost (the client tries to reconnect
 # meanwhile); measured: a dead scheduler is noticed by the client within 0.1 s.
 LOST_AFTER_S = 10.0
