@@ -1,5 +1,7 @@
 """Batches: pairs and a sequence on a Dask LocalCluster and on the process pool, one bad
-item, resume after a finished run and after a SIGKILL midway."""
+item, resume after a finished run and after a SIGKILL midway; resume that redoes changed
+items, Ctrl-C, workers that die with their batch, and a scheduler and two workers started
+with Dask's own command line on 127.0.0.1 (one worker killed; the scheduler killed)."""
 
 import json
 import os
@@ -220,3 +222,236 @@ def test_batch_options_reach_the_items_and_a_short_run_exits_3(data, tmp_path, c
     assert err == ["modalmorph: warning: 1 items did not reach the tolerance: heart"]
     result = json.loads((out / "heart" / "result.json").read_text())
     assert result["steps"] == 1 and result["options"]["max_steps"] == 1
+
+
+# ------------------------------------------------------------------------------ issue 26
+
+
+def _env():
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(SRC), os.environ.get(
+        "PYTHONPATH", "")])}
+
+
+def _hearts(folder: Path, n: int) -> Path:
+    """A TOML manifest of ``n`` heart pairs (~0.2-0.4 s each), k varied per item."""
+    ed, es = (_csv(folder / f"{name}.csv", load_heart(phase))
+              for name, phase in (("ed", "diastole"), ("es", "systole")))
+    (folder / "m.toml").write_text("".join(
+        f'[[item]]\nid = "p{i}"\nsource = "{ed.name}"\ntarget = "{es.name}"\nk = {80 + i}\n'
+        for i in range(n)))
+    return folder / "m.toml"
+
+
+def _complete(out: Path) -> set:
+    return {p.name for p in out.iterdir() if not p.name.startswith(".")
+            and (p / "result.json").is_file()}
+
+
+def _statuses(out: Path) -> dict:
+    return {r["id"]: r["status"] for r in _read_csv(out / "summary.csv")}
+
+
+def _wait(condition, what: str, proc=None, seconds: float = 120):
+    """Poll ``condition`` every 20 ms; generous bound: a loaded CI machine."""
+    deadline = time.monotonic() + seconds
+    while not condition():
+        assert proc is None or proc.poll() is None, f"the batch ended before {what}"
+        assert time.monotonic() < deadline, f"no {what} in {seconds} s"
+        time.sleep(0.02)
+
+
+def test_changed_inputs_and_options_are_redone(data, tmp_path):
+    """Resume compares each item's inputs' SHA-256 and options with its record."""
+    for name in ("ed.csv", "es.csv", "h0.csv", "h3.csv"):
+        (tmp_path / name).write_bytes((data / name).read_bytes())
+    manifest = tmp_path / "m.csv"
+    manifest.write_text("id,source,target,k\nheart,ed.csv,es.csv,\nhands,h0.csv,h3.csv,60\n")
+    out, engine = tmp_path / "out", Engine("processes", workers=1)
+    assert run(read_manifest(manifest), out, engine=engine).ok
+    assert [r.status for r in run(read_manifest(manifest), out, engine=engine).results] == \
+        ["skipped", "skipped"]
+    manifest.write_text("id,source,target,k\nheart,ed.csv,es.csv,\nhands,h0.csv,h3.csv,50\n")
+    stale = run(read_manifest(manifest), out, keep_stale=True, engine=engine)
+    assert [r.status for r in stale.results] == ["skipped", "skipped"]  # opted out
+    again = run(read_manifest(manifest), out, engine=engine).results
+    assert [(r.status, r.note) for r in again] == [
+        ("skipped", ""), ("ok", "redone: options changed (k 60 -> 50)")]
+    assert json.loads((out / "hands" / "result.json").read_text())["options"]["k"] == 50
+    (tmp_path / "es.csv").write_text((tmp_path / "es.csv").read_text() + "\n")  # same shape
+    again = run(read_manifest(manifest), out, engine=engine).results
+    assert [(r.status, r.note) for r in again] == [
+        ("ok", "redone: inputs changed (es.csv)"), ("skipped", "")]
+    forced = run(read_manifest(manifest), out, force=True, engine=engine).results
+    assert {r.note for r in forced} == {"redone: --force"}
+
+
+def test_stale_staging_removed_when_the_item_is_skipped(data, tmp_path):
+    items = [Item(id="hands", source=str(data / "h0.csv"), target=str(data / "h3.csv"))]
+    out = tmp_path / "out"
+    run(items, out, engine=Engine("processes", workers=1))
+    (out / ".hands.123-abc.partial" / "hands").mkdir(parents=True)  # a killed attempt
+    assert [r.status for r in run(items, out, engine=Engine("processes")).results] == \
+        ["skipped"]
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]
+
+
+def _children(pid: int) -> list:
+    psutil = pytest.importorskip("psutil")
+    return psutil.Process(pid).children(recursive=True)
+
+
+def _batch(argv, **kw):
+    return subprocess.Popen([sys.executable, "-m", "modalmorph", *map(str, argv)],
+                            env=_env(), start_new_session=True, stderr=subprocess.PIPE,
+                            stdout=subprocess.DEVNULL, text=True, **kw)
+
+
+def test_ctrl_c_stops_at_once_and_the_summary_marks_the_unfinished(tmp_path):
+    """SIGINT to the process group, as a terminal's Ctrl-C: one line, exit 130, no item
+    started after it, no worker left, the summary marks exactly the unfinished items."""
+    manifest = _hearts(tmp_path, 12)
+    out = tmp_path / "out"
+    proc = _batch(["batch", manifest, "--out", out, "--engine", "processes", "--workers",
+                   "2", "-q"])
+    try:
+        _wait(lambda: out.is_dir() and _complete(out), "finished item", proc)
+        workers = _children(proc.pid)
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130
+    assert err.strip().splitlines() == [l for l in err.strip().splitlines()
+                                        if l.startswith("modalmorph: interrupted")]
+    assert len(err.strip().splitlines()) == 1, err
+    done = _complete(out)
+    _wait(lambda: not any(w.is_running() and w.status() != "zombie" for w in workers),
+          "end of the workers (and multiprocessing's resource tracker)", seconds=10)
+    statuses = _statuses(out)
+    assert {k for k, s in statuses.items() if s == "ok"} == done
+    assert {k for k, s in statuses.items() if s == "interrupted"} == \
+        {f"p{i}" for i in range(12)} - done
+    assert 1 <= len(done) < 12
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]
+    time.sleep(1.0)
+    assert _complete(out) == done  # nothing written after the batch ended
+
+
+def test_workers_die_with_a_killed_batch(tmp_path):
+    """SIGKILL of the batch's process alone: its worker processes end too."""
+    manifest = _hearts(tmp_path, 12)
+    out = tmp_path / "out"
+    proc = _batch(["batch", manifest, "--out", out, "--engine", "processes", "--workers",
+                   "2", "-q"])
+    try:
+        _wait(lambda: len(_children(proc.pid)) >= 2, "worker processes", proc)
+        workers = _children(proc.pid)
+        proc.kill()
+        proc.wait()
+        _wait(lambda: not any(w.is_running() and w.status() != "zombie" for w in workers),
+              "end of the workers", seconds=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+        proc.stderr.close()
+
+
+def _dask(args, log):
+    """``dask ...`` (Dask's own command line) in its own session, logging to ``log``."""
+    return subprocess.Popen([sys.executable, "-m", "dask", *map(str, args)], env=_env(),
+                            start_new_session=True, stdout=log, stderr=log)
+
+
+@pytest.fixture
+def cluster(tmp_path):
+    """A scheduler and two single-threaded workers on 127.0.0.1, started apart from the
+    batch as on a cluster; yields (address, scheduler process, worker processes)."""
+    distributed = pytest.importorskip(
+        "distributed", reason="Dask is an optional extra: pip install 'modalmorph[dask]'")
+    file = tmp_path / "scheduler.json"
+    procs = []
+    with open(tmp_path / "dask.log", "w") as log:
+        try:
+            procs.append(_dask(["scheduler", "--host", "127.0.0.1", "--port", "0",
+                                "--no-dashboard", "--scheduler-file", file], log))
+            _wait(file.is_file, "scheduler file", procs[0])
+            for _ in range(2):
+                procs.append(_dask(["worker", "--scheduler-file", file, "--host",
+                                    "127.0.0.1", "--nthreads", "1", "--no-nanny",
+                                    "--no-dashboard"], log))
+            address = json.loads(file.read_text())["address"]
+            with distributed.Client(address, timeout="60s") as client:
+                client.wait_for_workers(2, timeout=120)
+            yield address, procs[0], procs[1:]
+        finally:
+            for proc in procs:
+                if proc.poll() is None:
+                    os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+
+
+def test_scheduler_and_workers_started_apart_one_worker_killed(cluster, tmp_path):
+    """A batch on `dask scheduler` + two `dask worker`s: one worker is killed after the
+    first item; its items are redone on the other, every item ok, summary = disk."""
+    address, _, workers = cluster
+    items = read_manifest(_hearts(tmp_path, 10))
+    out = tmp_path / "out"
+    killed = []
+
+    def progress(row, n_done, total):
+        if row is not None and not killed:
+            workers[0].kill()  # SIGKILL mid-batch: it holds an item now
+            killed.append(row.id)
+
+    done = run(items, out, engine=Engine(scheduler=address), progress=progress)
+    assert killed and workers[0].wait(timeout=10) == -signal.SIGKILL
+    assert done.counts == {"ok": 10} and done.engine == f"Dask scheduler {address}"
+    assert _complete(out) == {f"p{i}" for i in range(10)}
+    assert set(_statuses(out).values()) == {"ok"}
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]
+    for i in (0, 9):
+        result = json.loads((out / f"p{i}" / "result.json").read_text())
+        assert result["options"]["k"] == 80 + i and result["converged"]
+
+
+def test_scheduler_gone_one_line_and_exit_4(cluster, tmp_path):
+    """The scheduler killed mid-batch: one line, exit code 4, the finished items kept."""
+    address, scheduler, _ = cluster
+    out = tmp_path / "out"
+    proc = _batch(["batch", _hearts(tmp_path, 30), "--out", out, "--scheduler", address])
+    try:
+        _wait(lambda: out.is_dir() and _complete(out), "finished item", proc)
+        os.killpg(scheduler.pid, signal.SIGKILL)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 4, err
+    lines = err.strip().splitlines()  # quiet without -v: no Dask log line, no traceback
+    assert lines[:2] == ["30 of 30 items to compute, 0 complete in " + str(out),
+                         f"engine: Dask scheduler {address}"], err
+    assert lines[2].startswith("30 items: ") and len(lines) == 4, err
+    assert lines[3].startswith(f"modalmorph: error: the Dask scheduler {address}"), err
+    done, statuses = _complete(out), _statuses(out)
+    ok = {k for k, s in statuses.items() if s == "ok"}
+    assert 1 <= len(ok) < 30 and set(statuses.values()) == {"ok", "interrupted"}
+    # the workers may still finish the items they held, after the batch ended
+    assert ok <= done and len(done - ok) <= 2
+    assert not [p for p in out.iterdir() if p.name.startswith(".summary")]
+
+
+def test_one_progress_bar_with_failed_rate_and_eta(data, tmp_path, monkeypatch):
+    import io
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    monkeypatch.setattr(sys, "stderr", Terminal())
+    (data / "m3.csv").write_text("\n".join((data / "m.csv").read_text().splitlines()[:4]))
+    assert main(["batch", str(data / "m3.csv"), "--out", str(tmp_path / "out"),
+                 "--engine", "processes", "--workers", "1"]) == 1
+    text = sys.stderr.getvalue()
+    assert "3/3" in text and "1 failed" in text and "items/min" in text and "ETA" in text

@@ -47,13 +47,16 @@ __all__ = ["main", "build_parser", "add_option_flags", "flag_help", "load_config
 log = logging.getLogger("modalmorph")
 
 # Exit codes, documented in the help's epilog and the README.
-EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NOT_CONVERGED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NOT_CONVERGED, EXIT_LOST, EXIT_INTERRUPTED = \
+    0, 1, 2, 3, 4, 130
 EXIT_CODES = {
     EXIT_OK: "success",
     EXIT_FAILED: "batch: an item failed (the others are written)",
     EXIT_USAGE: "bad input or usage: one line names the file or option and the problem",
     EXIT_NOT_CONVERGED: "results written, but the tolerance was not reached (a warning "
                         "says where, even with -q)",
+    EXIT_LOST: "batch: the Dask scheduler was lost (finished items are kept; run again "
+               "to resume)",
     EXIT_INTERRUPTED: "interrupted by Ctrl-C: nothing half-written is left (a batch keeps its "
                       "finished items)",
 }
@@ -198,13 +201,21 @@ def _batch_parser(p) -> None:
                    help="address of a running Dask scheduler (tcp://host:port): run there; "
                         "inputs and OUT must be reachable by its workers")
     p.add_argument("--engine", choices=("auto", "dask", "processes"), default="auto",
-                   help="auto (default): Dask when installed (modalmorph[dask]), else a "
-                        "local process pool")
+                   help="auto (default): Dask with --scheduler, else whichever of a local "
+                        "process pool and a Dask LocalCluster (modalmorph[dask]) ends first "
+                        "by their measured start-up and per-item costs (the line 'engine:' "
+                        "says which)")
     p.add_argument("--figures", choices=("none", "summary", "all"), default="none",
                    help="none (default): results only; summary: also one figure of the "
                         "whole batch (OUT/summary.png); all: every item's figures and "
                         "animation too, as morph and track write them")
     p.add_argument("--force", action="store_true", help="redo items already complete in OUT")
+    p.add_argument("--keep-stale", action="store_true",
+                   help="skip every item complete in OUT, even when its inputs' SHA-256 or "
+                        "its options differ from those recorded in its result.json (by "
+                        "default such an item is redone and the summary says why)")
+    p.add_argument("-v", "--verbose", action="store_true",
+                   help="also print Dask's log lines (quiet without)")
     _add_config(p)
     add_option_flags(p, BATCH_CLASSES)
 
@@ -352,32 +363,70 @@ def _run_app(args) -> int:
 
 def _run_batch(args) -> int:
     items = batch.read_manifest(args.manifest)
-    logging.getLogger("distributed").setLevel(logging.WARNING)  # not a line per worker event
     settings = _settings(args, BATCH_CLASSES)
-    with _progress(len(items), quiet=args.quiet, what="batch", unit="item") as progress:
+    engine = batch.Engine(args.engine, workers=args.workers, scheduler=args.scheduler)
+    if engine.choice(len(items))[0]:
+        _dask_logs(verbose=args.verbose)
+    with _batch_progress(quiet=args.quiet) as progress:
         done = batch.run(items, args.out, settings=settings, figures=args.figures,
-                         force=args.force, engine=batch.Engine(
-                             args.engine, workers=args.workers, scheduler=args.scheduler),
-                         progress=None if progress is None else
-                         (lambda row, n, total: progress(n, None)))
-    failed = [row for row in done.results if row.status not in ("ok", "skipped")]
+                         force=args.force, keep_stale=args.keep_stale, engine=engine,
+                         progress=progress)
     if not args.quiet:
-        counts = {s: sum(row.status == s for row in done.results)
-                  for s in ("ok", "skipped", "failed", "interrupted")}
-        print(f"{len(items)} items: " + ", ".join(f"{n} {s}" for s, n in counts.items()
-                                                  if n) + f" ({done.engine})", file=sys.stderr)
+        print(f"{len(items)} items: " + ", ".join(
+            f"{done.counts[s]} {s}" for s in ("ok", "skipped", "failed", "interrupted")
+            if done.counts.get(s)), file=sys.stderr)
         _list_files(done.files)
-    for row in failed:
-        print(f"modalmorph: error: {row.id}: {row.status}: {row.error}", file=sys.stderr)
+    short = _batch_errors(done)
+    if done.lost:
+        print(f"modalmorph: error: {done.lost}: {done.counts.get('interrupted', 0)} items "
+              f"not finished, the others kept; run again to resume", file=sys.stderr)
+        return EXIT_LOST
     if done.interrupted:
+        print(f"modalmorph: interrupted: {done.counts.get('interrupted', 0)} items not "
+              f"finished, the others kept; run again to resume", file=sys.stderr)
         return EXIT_INTERRUPTED
-    if failed:
+    if done.counts.get("failed"):
         return EXIT_FAILED
-    short = [row.id for row in done.results if row.converged is False]
     if short:
-        _warn(f"{len(short)} items did not reach the tolerance: {', '.join(short)}")
+        more = f" and {len(short) - _NAMED_ITEMS} more" if len(short) > _NAMED_ITEMS else ""
+        _warn(f"{len(short)} items did not reach the tolerance: "
+              f"{', '.join(short[:_NAMED_ITEMS])}{more}")
         return EXIT_NOT_CONVERGED
     return EXIT_OK
+
+
+# Items named one by one in the messages of a batch (the summary lists them all).
+_NAMED_ITEMS = 20
+
+
+def _batch_errors(done) -> list[str]:
+    """Print a line per failed item (the first ones); the ids of items short of their
+    tolerance."""
+    failed, short = 0, []
+    for row in done.rows():
+        if row.status == "failed":
+            failed += 1
+            if failed <= _NAMED_ITEMS:
+                print(f"modalmorph: error: {row.id}: failed: {row.error}", file=sys.stderr)
+        elif row.converged is False:
+            short.append(row.id)
+    if failed > _NAMED_ITEMS:
+        print(f"modalmorph: error: {failed - _NAMED_ITEMS} more items failed (see "
+              f"{done.out / 'summary.csv'})", file=sys.stderr)
+    return short
+
+
+def _dask_logs(*, verbose: bool) -> None:
+    """Dask's log lines: shown with -v, else none (its loggers are set once imported)."""
+    try:
+        import distributed  # noqa: F401 - configures its loggers on import
+    except ImportError:
+        return
+    level = logging.INFO if verbose else logging.CRITICAL + 1
+    for name in [n for n in logging.root.manager.loggerDict
+                 if n.split(".")[0] in ("distributed", "tornado", "bokeh")]:
+        logging.getLogger(name).setLevel(level)
+    logging.getLogger("distributed").setLevel(level)
 
 
 def _run_demo(args) -> int:
@@ -452,6 +501,41 @@ def _progress(total: int | None, *, quiet: bool, what: str = "morphing", unit: s
 
         yield update
         bar.update(task, total=max(done[0], 1), completed=max(done[0], 1))
+
+
+
+@contextlib.contextmanager
+def _batch_progress(*, quiet: bool):
+    """One rich progress bar over the items to compute: done of total, failed, rate and
+    ETA; nothing when quiet or not on a terminal."""
+    if quiet or not sys.stderr.isatty():
+        yield None
+        return
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    columns = (TextColumn("batch"), BarColumn(), MofNCompleteColumn(),
+               TextColumn("{task.fields[failed]} failed"),
+               TextColumn("{task.fields[rate]}"), TimeElapsedColumn(), TextColumn("ETA"),
+               TimeRemainingColumn())
+    failed, start = [0], time.perf_counter()
+    with Progress(*columns, console=Console(stderr=True)) as bar:
+        task = bar.add_task("batch", total=None, failed=0, rate="")
+
+        def update(row, n_done, total):
+            failed[0] += row is not None and row.status == "failed"
+            rate = n_done / max(time.perf_counter() - start, 1e-9) * 60
+            bar.update(task, completed=n_done, total=total, failed=failed[0],
+                       rate=f"{rate:.0f} items/min" if n_done else "")
+
+        yield update
 
 
 if __name__ == "__main__":  # pragma: no cover
