@@ -10,17 +10,9 @@ from modalmorph import matching
 from modalmorph.core.shape import Shape, resample
 from modalmorph.datasets import load_hand, load_heart
 from modalmorph.errors import OptionError
-from modalmorph.matching import (
-    Matching,
-    _modal_deformation,
-    _monotone,
-    _monotone_totals,
-    _tangents,
-    _untangle,
-    affinity,
-    match,
-    modal_features,
-)
+from modalmorph.matching import Matching, affinity, coherent, match, modal_features
+from modalmorph.matching.alternation import _modal_deformation, _tangents
+from modalmorph.matching.search import _monotone, _untangle, monotone_totals
 from modalmorph.options import MatchOptions
 
 from .conftest import sphere_points
@@ -101,7 +93,7 @@ def test_auto_invariant_to_rotation_of_either_input(hand90, rng):
 def test_different_node_counts(m, n):
     (source, rows_s), (target, rows_t) = _hand(m, 0.3), _hand(n, 2.7)
     result = match(source, target)
-    assert result.shape == (m, n)
+    assert result.nodes == (m, n)
     assert result.pairs[:, 0].max() < m and result.pairs[:, 1].max() < n
     err = _cyclic_error(rows_s[result.pairs[:, 0]], rows_t[result.pairs[:, 1]], len(HAND))
     tol = len(HAND) / min(m, n)  # +-1 node of the coarser sampling
@@ -234,7 +226,7 @@ def test_monotone_search_is_optimal():
             assert abs(path_cost(C, j, 0.5, repeat) - total) < 1e-12  # ... and its path
             batch = np.stack([C, C[::-1], 2 * C])  # the batched totals agree
             expected = [_monotone(c, 0.5, repeat)[1] for c in batch]
-            np.testing.assert_allclose(_monotone_totals(batch, 0.5, repeat), expected,
+            np.testing.assert_allclose(monotone_totals(batch, 0.5, repeat), expected,
                                        rtol=0, atol=1e-12)
 
 
@@ -374,5 +366,5 @@ def test_smooth_warp_in_one_frame_keeps_the_along_contour_position(seed, monkeyp
         return np.mean(np.minimum(e, 1590 - e) > 1590 / 120)
 
     assert slipped(match(source, target)) <= 0.01  # measured 0 for both
-    monkeypatch.setattr(matching, "_coherent", lambda fit, placed, pairs: placed.z)
+    monkeypatch.setattr(coherent, "drift", lambda fit, placed, pairs: placed.z)
     assert slipped(match(source, target)) >= 0.05  # the test can fail

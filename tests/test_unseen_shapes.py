@@ -9,10 +9,10 @@ import pytest
 from numpy.testing import assert_allclose
 
 import modalmorph as mm
-from modalmorph import matching
 from modalmorph.core.quality import correspondence_rotation, curve_distances, self_crossings
 from modalmorph.core.shape import resample
 from modalmorph.datasets import load_hand, load_heart
+from modalmorph.matching import coherent
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "heart"
 
@@ -68,11 +68,11 @@ def test_glyph_sans_to_serif(ch):
 def test_glyph_corner_not_crossed_by_the_smooth_pass(monkeypatch):
     """F at 400 nodes: the coherent pass, unclamped, dragged the stem's nodes across the
     serif and the morph folded at its fourth step; each node's move is now cut to
-    ``matching._COHERENT_REACH`` target spacings."""
+    ``matching.coherent._COHERENT_REACH`` target spacings."""
     a = resample(_glyph("F", "DejaVu Sans"), 400)
     b = resample(_glyph("F", "DejaVu Serif"), 400)
     _check(a, b)
-    monkeypatch.setattr(matching, "_COHERENT_REACH", np.inf)
+    monkeypatch.setattr(coherent, "_COHERENT_REACH", np.inf)
     r = mm.morph(a, b, matching=mm.match(a, b))
     assert any(self_crossings(s) for s in r.shapes[1:])  # the test can fail
 

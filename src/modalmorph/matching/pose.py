@@ -1,0 +1,183 @@
+"""The pose search of the default matcher (method.md §2).
+
+Candidate rotations start at the rotation between the objects' principal axes (so they
+turn with either input); with ``rotation="auto"`` the identity and small turns about it
+join them (the common frame). Each is scored on a coarse subset of the nodes: for ordered
+contours by the total of the order-preserving search with both directions of the target
+(:func:`contour_pose`, branch and bound), for point sets by a few rigid rounds of
+assignment and alignment (:func:`cloud_pose`). The outcome is a :class:`Pose`.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from ..core.align import Similarity, align
+from ..core.shape import spread_indices
+from .features import Problem
+from .search import REPEAT, SKIP, Costs, cyclic, monotone_totals, ordered_pairs, trusted_pairs
+
+__all__ = ["Pose", "contour_pose", "cloud_pose"]
+
+_COARSE_NODES = 64  # nodes of each contour in the pose search (not measured)
+_COARSE_NODES_CLOUD = 256  # the same for point sets, which have 4 poses only (not measured)
+_ANGLES = 24  # rotations tried by the pose search in 2D (not measured)
+_POSE_BATCH = 4  # rotations searched at once by the branch and bound (speed, not measured)
+_POSE_ROUNDS = 2  # rigid rounds per point-set pose: after one a wrong pose can cost less
+_COMMON_ANGLE = 20.0  # degrees: poses this near the identity are the common frame (not measured)
+_SMALL_TURNS = (-10.0, 10.0)  # degrees, 2D common-frame poses besides the identity (not measured)
+_TURN_EVIDENCE = 7.5  # degrees: a turn below it is no turn (candidates 10 degrees apart)
+_COMMON_MARGIN = 2.0  # common frame / best total: shared hearts <= 1.51, turned hands >= 1.65
+
+
+@dataclass(frozen=True, eq=False)
+class Pose:
+    """The outcome of the pose search: the similarity to start from, the same pose with a
+    turn allowed, whether the target is searched reversed, whether the alternation may
+    rotate and whether a turned start is to be tried too (``common``)."""
+
+    sim: Similarity
+    turned: Similarity
+    reverse: bool = False
+    rotate: bool = True
+    common: bool = False
+
+
+def _axes(x: np.ndarray) -> np.ndarray:
+    """Principal axes of centred points as the columns of a proper rotation, each axis
+    signed by the third moment along it: they turn with the points (rotation covariant)."""
+    _, e = np.linalg.eigh(x.T @ x)
+    e = e * np.where(np.sum((x @ e) ** 3, axis=0) < 0, -1.0, 1.0)
+    if np.linalg.det(e) < 0:
+        e[:, 0] = -e[:, 0]
+    return e
+
+
+def _rotations(d: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Candidate rotations (r, d, d) taking x towards y for the pose search: in 2D a circle
+    of angles starting at the rotation between the principal axes (so the search turns
+    with either input); in 3D the proper rotations between the principal axes, with every
+    choice of axis signs."""
+    ex, ey = _axes(x), _axes(y)
+    if d == 2:
+        R0 = ey @ ex.T
+        t = 2 * np.pi * np.arange(_ANGLES) / _ANGLES
+        c, s = np.cos(t), np.sin(t)
+        return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2) @ R0
+    out = []
+    for signs in itertools.product([1.0, -1.0], repeat=3):
+        R = ey @ np.diag(signs) @ ex.T
+        if np.linalg.det(R) > 0:
+            out.append(R)
+    return np.array(out)
+
+
+def _pose_candidates(d: int, x: np.ndarray, y: np.ndarray, rotation: str
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rotations (r, d, d) tried by the pose search, a mask of those that keep the common
+    frame (within ``_COMMON_ANGLE`` of the identity) and the cosines of their angles.
+    ``rotation="none"``: the identity alone; ``"free"``: :func:`_rotations`; ``"auto"``:
+    both, with small turns about the identity in 2D."""
+    eye = np.eye(d)[None]
+    if rotation == "none":
+        return eye, np.ones(1, bool), np.ones(1)
+    rots = _rotations(d, x, y)
+    if rotation == "auto" and d == 2:  # the identity first, then small turns about it
+        c, s = np.cos(np.radians(_SMALL_TURNS)), np.sin(np.radians(_SMALL_TURNS))
+        small = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+        rots = np.concatenate([eye, small, rots])
+    elif rotation == "auto":
+        rots = np.concatenate([eye, rots])
+    cos = (np.trace(rots, axis1=1, axis2=2) - (d - 2)) / 2  # cos of the rotation angle
+    return rots, cos >= np.cos(np.radians(_COMMON_ANGLE)) - 1e-12, cos
+
+
+def _pose_search(C: np.ndarray, candidates: np.ndarray, closed: bool, skip: float,
+                 repeat: float) -> tuple[float, np.ndarray, bool, int]:
+    """The cheapest pose of an ordered contour among ``candidates`` (indices into the
+    rotations of ``C`` (r, m, n)), each with both directions of the target.
+
+    Branch and bound: an order-preserving total is at least the sum of each row's cheapest
+    choice, so rotations are searched best bound first and the search stops once no bound
+    left can beat the best total found. Returns the total, the cost matrix of the best
+    pose (target reversed when it won reversed), whether it is reversed and its index.
+    """
+    bound = np.minimum(C[candidates].min(axis=2), skip).sum(axis=1)
+    ranked = candidates[np.argsort(bound)]
+    bound = np.sort(bound)
+    best_total, best = np.inf, None
+    for start in range(0, len(ranked), _POSE_BATCH):
+        if bound[start] >= best_total:
+            break
+        r = ranked[start:start + _POSE_BATCH]
+        Cb = np.concatenate([C[r], C[r][:, :, ::-1]])  # forward, reversed target order
+        total = monotone_totals(cyclic(Cb, closed), skip, repeat)
+        k = int(np.argmin(total))
+        if total[k] < best_total:
+            best_total, best = float(total[k]), (Cb[k], k >= len(r), r[k % len(r)])
+    return best_total, *best
+
+
+def _coarse_costs(p: Problem):
+    """The pose search's cost (r, mc, nc) of every candidate rotation on evenly spread
+    subsets ``ci``, ``cj`` of the nodes; also the mask of the common-frame rotations and of
+    those turned enough to show a turn (:func:`_pose_candidates`)."""
+    x, y = p.src.normalized, p.tgt.normalized
+    coarse = _COARSE_NODES if p.ordered else _COARSE_NODES_CLOUD
+    ci, cj = spread_indices(p.src, coarse), spread_indices(p.tgt, coarse)
+    hc2 = p.tgt.spacing**2 * (p.tgt.m / len(cj)) ** 2
+    rots, near, cos = _pose_candidates(p.src.dim, x, y, p.rotation)
+    z = np.einsum("rab,ib->ria", rots, x[ci])
+    yc = y[cj]
+    D = (np.sum(z**2, -1)[:, :, None] + np.sum(yc**2, -1)[None, None, :]
+         - 2 * np.einsum("ria,ja->rij", z, yc)) / hc2
+    evidence = cos < np.cos(np.radians(_TURN_EVIDENCE))
+    return D + p.F[np.ix_(ci, cj)], ci, cj, near, evidence
+
+
+def contour_pose(p: Problem) -> Pose:
+    """Pose of an ordered contour: the cheapest rotation and target direction of the
+    order-preserving search on the coarse nodes; with ``rotation="auto"`` the best
+    common-frame pose unless another is cheaper by more than ``_COMMON_MARGIN``."""
+    C, ci, cj, near, evidence = _coarse_costs(p)
+    repeat = REPEAT if len(ci) > len(cj) else np.inf
+    total, Cb, reverse, r = _pose_search(C, np.arange(len(C)), p.closed, SKIP, repeat)
+    rotate, common = p.rotation != "none", False
+    if p.rotation == "auto":
+        total_near, Cn, rev_near = (total, Cb, reverse) if near[r] else _pose_search(
+            C, np.flatnonzero(near), p.closed, SKIP, repeat)[:3]
+        if total_near <= _COMMON_MARGIN * total:
+            Cb, reverse, common, rotate = Cn, rev_near, evidence[r], False
+    jj, _ = ordered_pairs(Cb, p.closed, SKIP, repeat)
+    keep = jj >= 0
+    if reverse:
+        jj = len(cj) - 1 - jj
+    xs, ys = p.src.normalized[ci[keep]], p.tgt.normalized[cj[jj[keep]]]
+    return Pose(align(xs, ys, rotate=rotate), align(xs, ys), reverse, rotate, common)
+
+
+def cloud_pose(p: Problem, costs: Costs, sub: np.ndarray) -> Pose:
+    """Pose of a point set: each candidate's coarse assignment, then ``_POSE_ROUNDS``
+    rigid rounds of search and alignment on ``sub`` from each (the coarse costs of poses
+    180 degrees apart can be close); the cheapest, or with ``rotation="auto"`` the best
+    common-frame pose unless another is cheaper by more than ``_COMMON_MARGIN``."""
+    C, ci, cj, near, evidence = _coarse_costs(p)
+    x, y = costs.x, costs.y
+    rotate, common = p.rotation != "none", False
+    tried = []
+    for r, c in map(linear_sum_assignment, C):
+        sim = align(x[ci[r]], y[cj[c]], rotate=rotate)
+        for _ in range(_POSE_ROUNDS):
+            good, total = trusted_pairs(costs, sim.apply(x), sub)
+            sim = align(x[good[:, 0]], y[good[:, 1]], rotate=rotate)
+        tried.append((total, sim))
+    best = min(range(len(tried)), key=lambda r: tried[r][0])
+    if p.rotation == "auto":
+        near_best = min(np.flatnonzero(near), key=lambda r: tried[r][0])
+        if tried[near_best][0] <= _COMMON_MARGIN * tried[best][0]:
+            common, rotate, best = evidence[best], False, near_best
+    return Pose(tried[best][1], tried[best][1], False, rotate, common)

@@ -1,0 +1,231 @@
+"""The searches that turn costs into pairs (method.md §2).
+
+The paper's: :func:`mutual_best` over the affinity (8) and the rejection of an
+assignment's implausible pairs (:func:`plausible`). The default search's: an
+order-preserving dynamic programme for contours (:func:`ordered_pairs`, cyclic for a closed
+target; :func:`monotone_totals` scores many problems at once for the pose search) and an
+assignment for point sets, over the cost of a placed source (:class:`Costs`,
+:func:`pairs_at`); the pairs trusted for the fits (:func:`trusted_pairs`), the search's
+objective (:func:`total`, :func:`objective`) and the final pairs (:func:`final_pairs`,
+which go round a closed target once).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from .features import sq_dist
+
+__all__ = ["SKIP", "REPEAT", "mutual_best", "plausible", "monotone_totals", "cyclic",
+           "ordered_pairs", "Costs", "pairs_at", "trusted_pairs", "total", "objective",
+           "final_pairs"]
+
+# The default search's costs, in squared target node spacings.
+SKIP = 16.0  # leaving a source node unmatched (not measured)
+REPEAT = 4.0  # one target for two consecutive source nodes, a denser source (not measured)
+_TRUST = 4.0  # pairs costing at most this are trusted for the fits (not measured)
+
+
+def mutual_best(Z: np.ndarray) -> np.ndarray:
+    """Pairs ``(i, j)`` with ``j`` best in row ``i`` and ``i`` best in column ``j``."""
+    j = np.argmin(Z, axis=1)
+    i = np.arange(Z.shape[0])
+    keep = np.argmin(Z, axis=0)[j] == i
+    return np.c_[i[keep], j[keep]]
+
+
+def plausible(cost: np.ndarray, factor: float) -> np.ndarray:
+    """Mask of the pairs whose cost is not implausibly high: at most ``factor`` times the
+    median cost (and at least the median, so that a clean matching loses nothing)."""
+    if cost.size == 0:
+        return np.ones(0, bool)
+    return cost <= factor * max(float(np.median(cost)), 1e-12)
+
+
+def _forward(C: np.ndarray, skip: float, repeat: float, keep: bool):
+    """The dynamic programme of :func:`_monotone` over the rows of ``C`` (..., m, n).
+
+    Returns ``(F, T)``: ``F[i, ..., 1 + j]`` is the best cost of rows < i whose last
+    target is <= j (``F[i, ..., 0]``: every one of them skipped) and ``T[i, ..., j]`` the
+    best cost of rows <= i with row i matched to j. Within a row the best predecessor is a
+    running minimum (``np.minimum.accumulate``): a few vectorised O(n) operations per row.
+    With ``keep=False`` only two rows of ``F`` are kept (the last is ``F[m % 2]``) and
+    ``T`` is None.
+    """
+    *batch, m, n = C.shape
+    F = np.empty((m + 1 if keep else 2, *batch, n + 1))
+    T = np.empty((m if keep else 1, *batch, n))
+    F[0] = 0.0
+    repeats = np.isfinite(repeat)
+    prev = np.empty((*batch, n))
+    for i in range(m):
+        Fi, Fn = (F[i], F[i + 1]) if keep else (F[i % 2], F[1 - i % 2])
+        Ti = T[i] if keep else T[0]
+        if repeats and i > 0:  # previous target < j, or == j at a price
+            np.add(Fi[..., 1:], repeat, out=prev)
+            np.minimum(prev, Fi[..., :-1], out=prev)
+            np.add(C[..., i, :], prev, out=Ti)
+        else:  # previous target < j
+            np.add(C[..., i, :], Fi[..., :-1], out=Ti)
+        np.minimum.accumulate(Ti, axis=-1, out=Fn[..., 1:])
+        np.add(Fi[..., 1:], skip, out=prev)  # or row i skipped
+        np.minimum(Fn[..., 1:], prev, out=Fn[..., 1:])
+        Fn[..., 0] = skip * (i + 1)
+    return F, (T if keep else None)
+
+
+def _monotone(C: np.ndarray, skip: float, repeat: float = np.inf
+              ) -> tuple[np.ndarray, float]:
+    """Order-preserving matching: ``j(i)`` non-decreasing in ``i``, each source node matched
+    (cost ``C[i, j]``) or skipped (cost ``skip``), a target reused by consecutive source
+    nodes at the extra cost ``repeat`` (``inf``: one-to-one); minimal total cost.
+
+    ``C`` has shape (m, n). Returns ``j`` (m,), -1 where the source node is unmatched, and
+    the total cost. The backtrack recomputes each decision on the one column it visits.
+    """
+    m, n = C.shape
+    F, T = _forward(C, skip, repeat, keep=True)
+    j = np.full(m, -1, np.intp)
+    repeats = np.isfinite(repeat)
+    cur = n - 1
+    for i in range(m - 1, -1, -1):
+        if cur < 0:
+            break
+        Ti, Fi = T[i], F[i]
+        a = cur - int(Ti[cur::-1].argmin())  # last position of the minimum so far
+        if Ti[a] < Fi[cur + 1] + skip:  # row i matched (else skipped)
+            j[i] = a
+            again = repeats and i > 0 and Fi[a + 1] + repeat < Fi[a]
+            cur = a if again else a - 1
+    return j, float(F[m, -1])
+
+
+def monotone_totals(C: np.ndarray, skip: float, repeat: float = np.inf) -> np.ndarray:
+    """The least total cost of :func:`_monotone` for a batch of problems ``C`` (..., m, n),
+    shape (...,), in memory of two rows."""
+    F, _ = _forward(C, skip, repeat, keep=False)
+    return F[C.shape[-2] % 2, ..., -1]
+
+
+def cyclic(C: np.ndarray, closed: bool) -> np.ndarray:
+    """A closed target doubled, so that an order-preserving search may start anywhere."""
+    return np.concatenate([C, C], axis=-1) if closed else C
+
+
+def ordered_pairs(C: np.ndarray, closed: bool, skip: float, repeat: float):
+    """Order-preserving pairs over a cost (m, n), cyclic for a closed target. Returns j
+    (m,) and the total cost."""
+    j, best = _monotone(cyclic(C, closed), skip, repeat)
+    return np.where(j >= 0, j % C.shape[-1], -1), best
+
+
+def _untangle(t: np.ndarray, cost: np.ndarray, n: int, skip: float, strict: bool
+              ) -> np.ndarray:
+    """Pairs of a cyclic order-preserving search that go round the target once.
+
+    ``t`` (K,) are the partners, in source order, on a closed target of ``n`` nodes, and
+    ``cost`` their costs. On the doubled target the search may step forward by nearly a
+    whole turn, which is a step backwards on the closed target: there, and at the
+    source's own cut, partners can overlap and cross. Each extra turn is removed at the
+    largest step: unrolled from just after it, the pairs at the end that reach past where
+    the first ones started are dropped, or the first ones they overlap, whichever keeps
+    the search's objective (pair costs plus ``skip`` per unmatched node) lower. Returns a
+    mask of the pairs kept.
+    """
+    keep = np.ones(len(t), bool)
+    while True:
+        idx = np.flatnonzero(keep)
+        steps = np.diff(np.r_[t[idx], t[idx[:1]]]) % n  # to the next partner, cyclically
+        if idx.size < 2 or steps.sum() <= n:  # round once (or all on one target)
+            return keep
+        k = int(np.argmax(steps))  # the step back, seen as nearly a whole turn
+        r = np.roll(idx, -(k + 1))
+        u = t[r[0]] + np.r_[0, np.cumsum(np.roll(steps, -(k + 1))[:-1])]
+        first, last = u[0] + n, u[-1] - n  # how far each end may reach
+        end = r[u >= first] if strict else r[u > first]
+        start = r[u <= last] if strict else r[u < last]
+        loss_end = skip * len(end) - cost[end].sum()  # change of the objective
+        loss_start = skip * len(start) - cost[start].sum()
+        keep[end if loss_end <= loss_start else start] = False
+
+
+def _pairs_from_j(j: np.ndarray, cost: np.ndarray, one_to_one: bool) -> np.ndarray:
+    i = np.flatnonzero(j >= 0)
+    pairs = np.c_[i, j[i]]
+    if one_to_one and len(pairs):  # a cyclic search may reuse a target once across the cut
+        order = np.argsort(cost[pairs[:, 0], pairs[:, 1]], kind="stable")
+        _, first = np.unique(pairs[order, 1], return_index=True)
+        pairs = pairs[np.sort(order[first])]
+    return pairs
+
+
+@dataclass(frozen=True, eq=False)
+class Costs:
+    """What one search compares: the source nodes ``x`` (m, d) placed somewhere, against
+    the target ``y`` (n, d) in search order (reversed when the pose search reversed it)
+    with the signature cost ``F`` (m, n) in the same order; ``h2`` the target's squared
+    node spacing; ``repeat`` and ``many`` as in :func:`_monotone` and
+    :func:`_pairs_from_j`."""
+
+    x: np.ndarray
+    y: np.ndarray
+    F: np.ndarray
+    h2: float
+    ordered: bool
+    closed: bool
+    repeat: float = np.inf
+    many: bool = False
+
+
+def pairs_at(costs: Costs, z: np.ndarray, rows: np.ndarray):
+    """Pairs (row index, target index) for the source nodes ``rows`` placed at ``z``, and
+    the cost matrix: order-preserving for contours, an assignment for point sets."""
+    C = sq_dist(z[rows], costs.y) / costs.h2 + costs.F[rows]
+    if costs.ordered:
+        j, _ = ordered_pairs(C, costs.closed, SKIP, costs.repeat)
+        return _pairs_from_j(j, C, one_to_one=not costs.many), C
+    r, c = linear_sum_assignment(C)
+    return np.c_[r, c], C
+
+
+def _trusted(pairs: np.ndarray, cost: np.ndarray, d: int) -> np.ndarray:
+    """The pairs trusted for the alignment and deformation fits: those costing at most
+    ``_TRUST``, or all of them when too few are."""
+    good = pairs[cost <= _TRUST]
+    return pairs if len(good) < max(d + 1, len(pairs) // 4) else good
+
+
+def trusted_pairs(costs: Costs, z: np.ndarray, sub: np.ndarray):
+    """Search the source nodes ``sub`` placed at ``z``: the trusted pairs (source index,
+    target index) and the total cost of all pairs."""
+    pairs, C = pairs_at(costs, z, sub)
+    cost = C[pairs[:, 0], pairs[:, 1]]
+    return _trusted(np.c_[sub[pairs[:, 0]], pairs[:, 1]], cost, z.shape[1]), cost.sum()
+
+
+def total(found: tuple, m: int) -> float:
+    """The search's objective from its pairs and cost matrix ``found``: pair costs plus
+    ``SKIP`` for every one of the ``m`` source nodes left unmatched."""
+    pairs, C = found
+    return float(C[pairs[:, 0], pairs[:, 1]].sum() + SKIP * (m - len(pairs)))
+
+
+def objective(costs: Costs, z: np.ndarray) -> float:
+    """The search's objective for every source node placed at ``z``."""
+    return total(pairs_at(costs, z, np.arange(len(z))), len(z))
+
+
+def final_pairs(final: Costs, z: np.ndarray, found: tuple, reject: float):
+    """The pairs ``found`` by the search on every source node placed at ``z`` (pairs
+    and cost matrix), less those costing more than ``reject`` and, on a closed target,
+    those that would go round it twice. Returns the pairs (target indices in search
+    order) and their costs."""
+    pairs, C = found
+    cost = C[pairs[:, 0], pairs[:, 1]]
+    keep = cost <= reject
+    if final.closed:  # partners round the target once: none crossing at the cut or a step back
+        keep &= _untangle(pairs[:, 1], cost, len(final.y), SKIP, strict=not final.many)
+    return pairs[keep], cost[keep]
