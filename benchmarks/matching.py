@@ -30,7 +30,7 @@ a near-circle keeps no trace of a few degrees' turn). The warp's along-contour p
 geometry leaves open there (without the warp CPD and the matcher both score 0.999 on 8
 heart pairs): CPD's smooth displacement prior is the kind of field ``_warp`` draws, and
 both sides are sampled evenly in the same rows, so CPD's balance of target weight per
-source node recovers it; the matcher's coherent pass (``matching._coherent``) does the
+source node recovers it; the matcher's coherent pass (``matching.coherent.drift``) does the
 same within the band of its order-preserving partners. On 12 pairs per seed (``--trials 12
 --families common-heart --methods auto,cpd``) CPD scores 0.906 (seed 2005) and 0.970
 (seed 11), the matcher 0.934 and 0.986 (without the pass 0.855 and 0.897): check this

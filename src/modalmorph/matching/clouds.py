@@ -24,29 +24,17 @@ from ..core.align import align
 
 __all__ = ["refine"]
 
-_ROUNDS = 3  # transport and smoothing rounds of the last level (the nodes themselves)
-# Rounds of each coarser level (operators built once per level), many where the level has
-# fewer cubes than _FEW x the source nodes (cheap), fewer above; and the over-relaxation of
-# every move. Measured on the 100 000-point blob turned 90 degrees (median pair error,
-# spacings; refinement time): 3 rounds x1 3.67 (10 s); 10 x1 2.91; 30 x1 1.71 (23 s);
-# 15 x2 1.71 (13.5 s); 30 x2 1.52 (23 s); x3 diverged; 60 / 10 x2 1.49 (13 s), 90 / 5 x2
-# 1.49. Started at the truth, 30 x2 drifts 0.29 spacing (3 x1: 0.12).
-_FEW = 0.25
-_COARSE_ROUNDS = (60, 10)
-_OVERRELAX = 2.0
+_ROUNDS = 3  # transport and smoothing rounds of the last level, the nodes (not measured)
+_FEW = 0.25  # a level with fewer cubes than this x the source nodes is cheap: more rounds
+_COARSE_ROUNDS = (60, 10)  # rounds of a coarse level, cheap or not (100k blob: 3.67 -> 1.49)
+_OVERRELAX = 2.0  # over-relaxation of every move (x3 diverged; x1: 1.71 against 1.52)
 _NEIGHBOURS = 16  # nearest nodes: controls per node, and edges of the transport graph
 _SINKHORN = 30  # scaling iterations of the transport
 _TEMPERATURE = 0.5  # width of the transport's Gaussian, x the level's cube width
 _WIDTH = 8.0  # smoothing width, x the level's cube width
 _STEP = 2.0  # ratio of the cube widths of successive levels
-# The last level leaves each node's landing noisy (the target's noise: 1 % of the size is
-# 2 spacings at 100 000 points): its move beyond the similarity is averaged over its
-# _AVERAGE nearest source nodes, _AVERAGE_PASSES times. Measured on benchmarks/match3d.py
-# (median pair error, spacings): 100 000-point blob turned 90 deg, none 1.14, one pass of
-# 8 / 32 / 128 / 512 nearest 1.01 / 0.93 / 0.87 / 0.85, 32 x 4 0.88 (128 x 1: 0.45 GB
-# against 0.38); 100 000-point bunny turned 180 deg 1.47 -> 0.95; 2000 points 0.37 -> 0.38.
-_AVERAGE = 32
-_AVERAGE_PASSES = 4
+_AVERAGE = 32  # last landings averaged over this many nearest nodes (100k blob 1.14 -> 0.88)
+_AVERAGE_PASSES = 4  # passes of that average (measured together with _AVERAGE)
 
 
 def _cells(p: np.ndarray, width: float) -> np.ndarray:
