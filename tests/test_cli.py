@@ -407,3 +407,14 @@ def test_ctrl_c_says_one_line_exits_130_and_leaves_nothing(tmp_path):
     assert proc.returncode == 130, err
     assert err.strip().splitlines() == ["modalmorph: interrupted"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "b.csv"]
+
+
+def test_a_self_crossing_contour_is_refused_with_where(tmp_path, capsys):
+    t = np.linspace(0.0, 2.0 * np.pi, 100, endpoint=False) + 0.01
+    np.savetxt(tmp_path / "eight.csv", np.c_[np.sin(t), np.sin(2 * t)], delimiter=",")
+    np.savetxt(tmp_path / "circle.csv", np.c_[np.cos(t), np.sin(t)], delimiter=",")
+    assert main(["morph", str(tmp_path / "circle.csv"), str(tmp_path / "eight.csv"),
+                 "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "target crosses itself: the segment from node" in err[0], err
+    assert not (tmp_path / "out").exists()

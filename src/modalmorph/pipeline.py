@@ -122,9 +122,10 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
         raise ShapeError(f"source and target must have the same dimension, got "
                          f"{src.dim}D and {tgt.dim}D")
     options, match_options = _options(options, matching, overrides)
-    for name, shape in (("source", src), ("target", tgt)):
-        if shape.dim == 2 and shape.ordered:
-            check_simple(shape.points, name, shape.closed)
+    if not (matching is None or isinstance(matching, MatchOptions)):  # match() checks
+        for name, shape in (("source", src), ("target", tgt)):
+            if shape.dim == 2 and shape.ordered:
+                check_simple(shape.points, name, shape.closed)
     with limit(max(src.m, tgt.m)):
         if matching is None or isinstance(matching, MatchOptions):
             matching = match(src, tgt, options=match_options)

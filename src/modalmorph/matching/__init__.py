@@ -50,10 +50,11 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from ..core.align import Similarity, align
-from ..core.quality import area
+from ..core.quality import area, check_simple
 from ..core.shape import Shape, as_shape, check_pairs, spread_indices
 from ..errors import OptionError, ShapeError
 from ..options import METHODS, ROTATIONS, MatchOptions
+from ..threads import limit
 from .alternation import alternate, fits, keep_or_turn
 from .clouds import refine
 from .coherent import settle
@@ -252,13 +253,17 @@ def _match_paper(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions):
 
 
 def _shapes(source, target) -> tuple[Shape, Shape]:
-    """Both objects as shapes of one dimension; a closed contour must have an area."""
+    """Both objects as shapes of one dimension; a 2D contour must not cross itself, and a
+    closed one must have an area."""
     src, tgt = as_shape(source, "source"), as_shape(target, "target")
     for name, shape in (("source", src), ("target", tgt)):
+        if shape.dim == 2 and shape.ordered:
+            check_simple(shape.points, name, shape.closed)
         if shape.dim == 2 and shape.ordered and shape.closed and (
                 abs(area(shape.normalized)) < FLAT_AREA):
             raise ShapeError(f"{name} is a closed contour with no area (its nodes lie on "
-                             f"one line): pass it as Shape(points, closed=False)")
+                             "one line): a closed contour must enclose an area (an open "
+                             "curve is Shape(points, closed=False))")
     if src.dim != tgt.dim:
         raise ShapeError(f"source and target must have the same dimension, got "
                          f"{src.dim}D and {tgt.dim}D")
@@ -304,14 +309,15 @@ def match(source, target, *, options: MatchOptions | None = None, **overrides) -
     src, tgt = _shapes(source, target)
     n_modes = DEFAULT_MODES if opts.modes is None else int(opts.modes)
     n_modes = min(n_modes, src.dim * min(src.m, tgt.m, MAX_MODEL_NODES))
-    if opts.method != "auto":
-        pairs, cost, sim = _match_paper(src, tgt, n_modes, opts)
-    elif src.dim == 3 and not (src.ordered or tgt.ordered):
-        pairs, cost, sim = _match_cloud(src, tgt, n_modes, opts)
-    else:
-        large = max(src.m, tgt.m) > LARGE
-        pairs, cost, sim, _ = (_match_large if large else _match_auto)(src, tgt, n_modes,
-                                                                       opts)
+    with limit(max(src.m, tgt.m)):
+        if opts.method != "auto":
+            pairs, cost, sim = _match_paper(src, tgt, n_modes, opts)
+        elif src.dim == 3 and not (src.ordered or tgt.ordered):
+            pairs, cost, sim = _match_cloud(src, tgt, n_modes, opts)
+        else:
+            large = max(src.m, tgt.m) > LARGE
+            pairs, cost, sim, _ = (_match_large if large else _match_auto)(
+                src, tgt, n_modes, opts)
     order = np.argsort(pairs[:, 0], kind="stable")
     return Matching(pairs=pairs[order].astype(np.intp), cost=cost[order], method=opts.method,
                     modes=n_modes, sigma=opts.sigma, similarity=sim, nodes=(src.m, tgt.m),
