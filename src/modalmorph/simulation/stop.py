@@ -83,6 +83,7 @@ class StopTest:
 
     @property
     def tolerance(self) -> float:
+        """The tolerance on :meth:`distance` (normalised units)."""
         return self.limits.tolerance
 
     def distance(self, current: np.ndarray, near: float, lazy: bool = True) -> float:

@@ -85,7 +85,7 @@ class ModalSystem:
     modes: Modes
     mass_modes: np.ndarray
     field: Field
-    spread: object
+    spread: object  # sparse array (m, mc) or None
     k_ref: float
     k_abs: float
     source_n: np.ndarray
