@@ -81,3 +81,16 @@ def test_newmark_free_oscillator_conserves_energy():
     for _ in range(2000):
         x, v, a = nm.step(x, v, a, np.zeros(2))
     assert_allclose(0.5 * (v**2 + w**2 * x**2), e0, rtol=1e-10)
+
+
+def test_newmark_checks_its_parameters():
+    """Newmark refuses what would make it unstable or undefined, at construction."""
+    K, C = np.eye(2), np.zeros((2, 2))
+    with pytest.raises(ValueError, match="not unconditionally stable"):
+        Newmark(K, C, dt=0.1, alpha=0.2, delta=0.5)
+    with pytest.raises(ValueError, match="positive finite"):
+        Newmark(K, C, dt=0.0)
+    with pytest.raises(ValueError, match="square and of one size"):
+        Newmark(K, np.zeros((3, 3)), dt=0.1)
+    nm = Newmark(K, C, dt=0.1)
+    assert nm.coefficients[0] == 1 / (0.25 * 0.1**2)  # a0 of (15), computed once

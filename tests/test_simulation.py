@@ -5,8 +5,12 @@ import dataclasses
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
+from scipy.spatial import ConvexHull
 
 from modalmorph import MorphOptions, Shape, Simulation, morph
+from modalmorph.simulation.stop import CurveStop, PairStop, SurfaceStop
+
+from .conftest import sphere_points
 
 
 def _ellipses(m=40):
@@ -66,3 +70,30 @@ def test_bad_pairs_refused():
     a, b, _ = _ellipses()
     with pytest.raises(ValueError, match="no node is matched"):
         Simulation(a, b, np.zeros((0, 2), int))
+
+
+def _objects(kind, rng):
+    """A source, a target and node-to-node pairs of one kind of object."""
+    if kind == "contour":
+        return _ellipses()
+    a = sphere_points(60, rng, radii=(1.0, 0.8, 0.6))
+    b = a * [1.2, 0.7, 0.9] + 0.05
+    pairs = np.c_[np.arange(60), np.arange(60)]
+    if kind == "surface":
+        faces = ConvexHull(a).simplices
+        return Shape(a, faces=faces), Shape(b, faces=faces), pairs
+    if kind == "points2d":
+        return Shape(a[:, :2], ordered=False), Shape(b[:, :2], ordered=False), pairs
+    return Shape(a), Shape(b), pairs
+
+
+@pytest.mark.parametrize("kind, stop", [("contour", CurveStop), ("surface", SurfaceStop),
+                                        ("points3d", SurfaceStop), ("points2d", PairStop)])
+def test_state_is_small_and_the_stop_test_chosen_once(kind, stop, rng):
+    """The driver holds a system, a stop test, a state and a history: at most 12
+    attributes after a run, whatever the object; the stop test fits the object."""
+    a, b, pairs = _objects(kind, rng)
+    sim = Simulation(a, b, pairs, MorphOptions(max_steps=5)).run()
+    assert len(vars(sim)) <= 12, sorted(vars(sim))
+    assert type(sim.stop) is stop
+    assert sim.result().steps == sim.steps == len(sim.history.shapes) - 1

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.linalg import lapack
@@ -14,11 +14,7 @@ UNMATCHED_RULES = ("arclength", "mean")
 
 # Groups of (20) with at most this many (node, candidate) pairs share one vectorised pass.
 _SMALL_GROUP = 256
-# A target stretch between the partners of two consecutive matched nodes is covered when
-# it has at most this many times the target's nodes per source node for each source node
-# between them (LoadTargets._release_to_cover). Measured on hand pairs at 80-200 nodes:
-# with 3 (or no release) hand 0 (80 nodes) -> hand 3 (90) cut fingertips 18 px deep (the
-# matcher skipped their target nodes) and stopped short; 1.5: 8 px, converged in 9 steps.
+# Target nodes per source node a stretch may hold and still be covered (method.md §4).
 _COVER = 1.5
 
 
@@ -305,7 +301,16 @@ class Newmark:
     """Newmark's method (14)-(15) for ``x'' + C x' + K x = f`` in modal coordinates.
 
     ``C`` and ``K`` are (n, n) matrices (diagonal for uncoupled modes). ``alpha`` and
-    ``delta`` are Newmark's parameters (beta and gamma in most texts).
+    ``delta`` are Newmark's parameters (beta and gamma in most texts), refused outside the
+    unconditionally stable range (:func:`check_newmark`). The coefficients of (15) and the
+    inverse of the effective stiffness are computed once, at construction.
+
+    Raises
+    ------
+    ValueError
+        For a time step that is not a positive finite number, ``K`` and ``C`` not square
+        and of one size, unstable ``alpha`` and ``delta``, or an effective stiffness that
+        is not positive definite.
     """
 
     K: np.ndarray
@@ -313,11 +318,25 @@ class Newmark:
     dt: float
     alpha: float = 0.25
     delta: float = 0.5
+    # a0 .. a5 of (15), from alpha, delta and dt
+    coefficients: tuple = field(init=False, repr=False, compare=False)
+    # (K + a0 I + a1 C)^-1, the left side of (15) inverted
+    inverse: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
-        a0 = 1.0 / (self.alpha * self.dt**2)
-        a1 = self.delta / (self.alpha * self.dt)
+        if not (np.isfinite(self.dt) and self.dt > 0):
+            raise ValueError(f"Newmark's time step must be a positive finite number, got "
+                             f"dt={self.dt!r}")
         n = self.K.shape[0]
+        if self.K.shape != (n, n) or self.C.shape != (n, n):
+            raise ValueError(f"Newmark's K and C must be square and of one size, got "
+                             f"{self.K.shape} and {self.C.shape}")
+        check_newmark(self.alpha, self.delta)
+        al, de, dt = self.alpha, self.delta, self.dt
+        a0, a1 = 1.0 / (al * dt**2), de / (al * dt)
+        a2, a3 = 1 / (al * dt), 1 / (2 * al) - 1
+        a4, a5 = de / al - 1, dt / 2 * (de / al - 2)
+        object.__setattr__(self, "coefficients", (a0, a1, a2, a3, a4, a5))
         K_eff = self.K + a0 * np.eye(n) + a1 * self.C  # left side of (15)
         # K_eff is SPD and well conditioned (a0 I dominates for small steps): its inverse,
         # formed once, turns every step's solve into one matrix-vector product
@@ -327,16 +346,14 @@ class Newmark:
         if info != 0:
             raise ValueError("Newmark's effective stiffness is not positive definite: "
                              "check the damping and the time step")
-        object.__setattr__(self, "_inverse", np.tril(inv) + np.tril(inv, -1).T)
+        object.__setattr__(self, "inverse", np.tril(inv) + np.tril(inv, -1).T)
 
     def step(self, x, v, a, f):
         """One step: state (x, v, a) at t and load f at t + dt -> state at t + dt."""
-        al, de, dt = self.alpha, self.delta, self.dt
-        a0, a1 = 1 / (al * dt**2), de / (al * dt)
-        a2, a3 = 1 / (al * dt), 1 / (2 * al) - 1
-        a4, a5 = de / al - 1, dt / 2 * (de / al - 2)
+        a0, a1, a2, a3, a4, a5 = self.coefficients
         rhs = f + (a0 * x + a2 * v + a3 * a) + self.C @ (a1 * x + a4 * v + a5 * a)  # (15)
-        x1 = self._inverse @ rhs
+        x1 = self.inverse @ rhs
         a_new = a0 * (x1 - x) - a2 * v - a3 * a
+        de, dt = self.delta, self.dt
         v1 = v + dt * ((1 - de) * a + de * a_new)  # (14)
         return x1, v1, a_new

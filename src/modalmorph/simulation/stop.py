@@ -1,0 +1,179 @@
+"""The stop test (method.md §5): how far the shape is from the target, and why to stop.
+
+One class per kind of object, chosen once by :func:`choose_stop_test`, all with the
+interface of :class:`StopTest`: :class:`CurveStop` for contours (the two-way distance
+between the curves), :class:`SurfaceStop` for 3D point sets and surfaces (the two-way
+distance to the other's surface less the target's roughness), :class:`PairStop` for the
+others (the mean distance of the pulled pairs). Distances are in the model's normalised
+units.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..core.quality import Polyline
+from ..core.shape import Shape, resample
+from ..options import MorphOptions
+
+__all__ = ["CurveStop", "LAZY_SPACINGS", "Limits", "PLANE", "PairStop", "STALL",
+           "STALL_GAIN", "StopTest", "SurfaceStop", "choose_stop_test", "to_surface"]
+
+STALL = 5  # steps over which a stalled distance means equilibrium (method.md §5)
+STALL_GAIN = 1e-3  # the least relative gain of the pulled pairs' distance over STALL steps
+PLANE = 8  # nearest points whose least-squares plane is the surface (method.md §5)
+LAZY_SPACINGS = 4  # surfaces measured within the tolerance plus this many spacings (§5)
+
+
+@dataclass(frozen=True)
+class Limits:
+    """When to stop, normalised units: ``tolerance`` (converged), ``at_rest`` (the
+    largest step that moves nothing), ``stall`` (whether a stalled distance is
+    equilibrium), ``max_steps``."""
+
+    tolerance: float
+    at_rest: float
+    stall: bool
+    max_steps: int
+
+    @classmethod
+    def from_options(cls, options: MorphOptions, target_size: float, size: float) -> Limits:
+        """The options' limits for a target of RMS radius ``target_size`` measured in
+        units of ``size`` (user units)."""
+        o = options
+        tol = (o.tol_distance / size) if o.tol_distance is not None \
+            else o.tol * target_size / size
+        return cls(tolerance=tol, at_rest=o.equilibrium_tol * target_size / size,
+                   stall=o.equilibrium_tol > 0, max_steps=o.max_steps)
+
+    def reason(self, distance: float, steps: int, moved: float,
+               near: Sequence[float]) -> str | None:
+        """Why to stop after ``steps`` steps, the last of which moved no node more than
+        ``moved``: ``"tolerance"`` (``distance`` within it), ``"equilibrium"`` (no node
+        moved visibly, or the pulled pairs' distances ``near``, one per step, gained less
+        than ``STALL_GAIN`` over ``STALL`` steps) or ``"max_steps"``; None to go on."""
+        if distance <= self.tolerance:
+            return "tolerance"
+        if steps == 0:
+            return None
+        if moved <= self.at_rest or (self.stall and steps > STALL
+                                     and abs(near[-1 - STALL] - near[-1])
+                                     <= STALL_GAIN * near[-1]):
+            return "equilibrium"  # at rest, or the distance no longer decreases
+        if steps >= self.max_steps:
+            return "max_steps"
+        return None
+
+
+class StopTest:
+    """The interface of the stop tests: :meth:`distance` and :meth:`reason`.
+
+    ``lazy`` says whether ``distance(..., lazy=True)`` may give the lower bound ``near``
+    instead of the full measure: the driver then measures in full at the end.
+    """
+
+    lazy = False
+
+    def __init__(self, limits: Limits):
+        self.limits = limits
+
+    @property
+    def tolerance(self) -> float:
+        """The tolerance on :meth:`distance` (normalised units)."""
+        return self.limits.tolerance
+
+    def distance(self, current: np.ndarray, near: float, lazy: bool = True) -> float:
+        """The measure of :attr:`Run.distance` for the shape ``current`` (m, d), given
+        ``near``, the mean distance of its pulled pairs (a lower bound of the measure)."""
+        raise NotImplementedError
+
+    def reason(self, distance: float, steps: int, moved: float,
+               near: Sequence[float]) -> str | None:
+        """:meth:`Limits.reason`."""
+        return self.limits.reason(distance, steps, moved, near)
+
+
+class PairStop(StopTest):
+    """2D point sets, and 3D ones of at most ``PLANE`` points: the mean distance of the
+    nodes pulled to partners."""
+
+    def distance(self, current: np.ndarray, near: float, lazy: bool = True) -> float:
+        return near
+
+
+class CurveStop(StopTest):
+    """Contours: the largest of ``near`` and the mean distances both ways between the
+    shape's and the target's polylines, less, the second way, what a shape of the
+    source's node count spread evenly along the target leaves (``floor``). With ``lazy``
+    the curves are measured only once ``near`` is within the tolerance."""
+
+    lazy = True
+
+    def __init__(self, limits: Limits, target: np.ndarray, *, closed: bool,
+                 target_closed: bool, m: int):
+        super().__init__(limits)
+        self.closed = closed
+        self.target = target
+        self.to_target = Polyline(target, target_closed)
+        self.floor = float(Polyline(resample(target, m, closed=target_closed), target_closed)
+                           .distance(target).mean())
+
+    def distance(self, current: np.ndarray, near: float, lazy: bool = True) -> float:
+        if lazy and near > self.limits.tolerance:
+            return near
+        d_ab = self.to_target.distance(current)
+        d_ba = Polyline(current, self.closed).distance(self.target)
+        return max(near, float(d_ab.mean()), float(d_ba.mean()) - self.floor)
+
+
+class SurfaceStop(StopTest):
+    """3D point sets and surfaces: the larger of the mean distances both ways between the
+    shape's nodes and the other's surface (:func:`to_surface`), less the target's own
+    roughness ``floor`` (0 at least). With ``lazy`` the surfaces are measured only once
+    ``near`` is within ``gate``, the tolerance plus ``LAZY_SPACINGS`` target spacings."""
+
+    lazy = True
+
+    def __init__(self, limits: Limits, target: np.ndarray):
+        super().__init__(limits)
+        self.target = target
+        self.tree = cKDTree(target)
+        self.floor = float(to_surface(target, target, self.tree, skip=1).mean())
+        spacing = self.tree.query(target, k=2)[0][:, 1].mean()
+        self.gate = limits.tolerance + LAZY_SPACINGS * spacing
+
+    def distance(self, current: np.ndarray, near: float, lazy: bool = True) -> float:
+        if lazy and near > self.gate:
+            return near
+        Y = self.target
+        d_ab = to_surface(current, Y, self.tree).mean()
+        d_ba = to_surface(Y, current, cKDTree(current)).mean()
+        return max(float(d_ab), float(d_ba), self.floor) - self.floor
+
+
+def choose_stop_test(source: Shape, target: Shape, target_n: np.ndarray,
+                     limits: Limits) -> StopTest:
+    """The stop test for these objects (``target_n``: the target's nodes, normalised)."""
+    if source.ordered and target.ordered:
+        return CurveStop(limits, target_n, closed=source.closed,
+                         target_closed=target.closed, m=source.m)
+    if source.dim == 3 and min(source.m, target.m) > PLANE:
+        return SurfaceStop(limits, target_n)
+    return PairStop(limits)
+
+
+def to_surface(points: np.ndarray, cloud: np.ndarray, tree: cKDTree,
+               skip: int = 0) -> np.ndarray:
+    """Distance of every point to the surface of a point cloud (normalised units): to the
+    least-squares plane of its ``PLANE`` nearest cloud points (the ``skip`` nearest left
+    out, e.g. the point itself). Linear in memory; unlike the distance to the nearest
+    cloud point, nearly zero for a point on a smooth surface between samples."""
+    near = cloud[tree.query(points, k=PLANE + skip)[1][:, skip:]]  # (p, k, d)
+    centre = near.mean(axis=1)
+    spread = near - centre[:, None]
+    normal = np.linalg.eigh(np.einsum("pki,pkj->pij", spread, spread))[1][:, :, 0]
+    return np.abs(np.einsum("pi,pi->p", normal, points - centre))

@@ -1,0 +1,251 @@
+"""The modal system of one morph, built once: ``x'' + C_mod x' + K_mod x = Phi^T R``.
+
+:class:`ModalSystem` holds what the time integration reads and never changes: the
+physical model and the modes it superposes, the reference scales, the modal stiffness
+(with the similarity motions free), the springs, the damping, the Newmark integrator and
+the load targets (method.md §4). Everything runs in the model's normalised frame (the
+centroid and RMS radius of the shape it is built on).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import linalg
+
+from ..core.dynamics import LoadTargets, Newmark
+from ..core.element import self_entries
+from ..core.energy import node_energy
+from ..core.model import FEModel
+from ..core.modes import Modes, rayleigh
+from ..core.shape import Shape, as_shape, check_pairs, coarsen
+from ..options import MorphOptions
+from .basis import Field, flat, mode_count, nodes, similarity_fields, superposed_modes
+from .result import Resolved
+
+__all__ = ["ModalSystem", "RANK_TOL", "damping_matrix", "elastic_stiffness",
+           "frequency_range", "similarity_free", "springs"]
+
+RANK_TOL = 1e-10  # similarity fields whose modal image is below this fraction are dependent
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class ModalSystem:
+    """The equations of one morph in modal coordinates, built once by :meth:`build`.
+
+    Attributes
+    ----------
+    source, target : Shape
+        The object that deforms and the target.
+    pairs : ndarray of int, shape (K, 2)
+        Matched (source, target) pairs.
+    options : MorphOptions
+        The physical model, loads, time integration and stop test.
+    reduced : Shape
+        The shape the model is built on: the source, or a coarser copy of it (its
+        normalised frame is the frame of every array below).
+    model : FEModel
+        The physical model.
+    n_modes : int
+        The modes asked of the model (before the Rayleigh-Ritz additions).
+    modes : Modes
+        The modes superposed (:func:`~modalmorph.simulation.basis.superposed_modes`).
+    mass_modes : ndarray, shape (d*mc, n)
+        ``M Phi`` at the model's nodes (method.md §1).
+    field : Field
+        ``Phi`` at every node of the source.
+    spread : sparse array (m, mc) or None
+        A reduced model's node energy spread over the source's nodes (None: not reduced).
+    k_ref : float
+        The stiffness of one node, the unit of ``k`` and of the energies.
+    k_abs : float
+        The springs' stiffness ``k`` in the model's units, per source node.
+    source_n, target_n : ndarray, shape (m, d) and (n, d)
+        Source and target nodes, normalised.
+    loads : LoadTargets
+        Where every node is pulled (19)-(20).
+    pulled : ndarray of int, shape (K', 2)
+        The pairs the springs (19) pull together (:attr:`LoadTargets.pairs`).
+    stiffness : ndarray, shape (n, n)
+        The elastic stiffness ``K_el`` (13), the similarity motions free or not.
+    kappa : float or None
+        The consistent loads' modal spring (None: loads through the field, node by node).
+    newmark : Newmark
+        The integrator of the loaded model: ``K_mod``, ``C_mod`` and the time step.
+    """
+
+    source: Shape
+    target: Shape
+    pairs: np.ndarray
+    options: MorphOptions
+    reduced: Shape
+    model: FEModel
+    n_modes: int
+    modes: Modes
+    mass_modes: np.ndarray
+    field: Field
+    spread: object  # sparse array (m, mc) or None
+    k_ref: float
+    k_abs: float
+    source_n: np.ndarray
+    target_n: np.ndarray
+    loads: LoadTargets
+    pulled: np.ndarray
+    stiffness: np.ndarray
+    kappa: float | None
+    newmark: Newmark
+
+    @classmethod
+    def build(cls, source, target, pairs, options: MorphOptions | None = None) -> ModalSystem:
+        """The system of ``source`` (Shape or (m, d)) pulled onto ``target`` by ``pairs``."""
+        source, target = as_shape(source, "source"), as_shape(target, "target")
+        pairs = check_pairs(pairs, source.m, target.m)
+        o = MorphOptions() if options is None else options
+        # The physical model: the source itself, or a coarser copy when it has more nodes
+        # than model_nodes; every node then moves with the element's displacement field.
+        reduced = coarsen(source, o.model_nodes)
+        model = FEModel(reduced, sigma=o.sigma, material=o.material, solver=o.solver)
+        n_modes = mode_count(o.modes, model.dim * model.m, sparse=model.truncated)
+        modes = superposed_modes(model, n_modes)
+        mass_modes = model.mass_times_modes(modes)  # M Phi = (I kron A) M_g psi (method.md §1)
+        # Reference scales: the stiffness and mass of one node in the Gaussian basis.
+        k_ref, V = self_entries(model.width, source.dim, *model.lame)
+        w_ref = np.sqrt(k_ref / (o.material.rho * V))
+        # one spring per node; with a reduced model their total stiffness is kept the same
+        k_abs = o.k * k_ref * model.m / source.m
+        X1 = reduced.to_normalized(source.points)  # all in the model's normalised frame
+        Y = reduced.to_normalized(target.points)
+        field, spread = _nodal_field(model, modes, X1, reduced is not source)
+        loads = LoadTargets(X1, Y, pairs, ordered=bool(source.ordered), closed=source.closed,
+                            target_closed=target.closed, neighbours=o.neighbours,
+                            rule=o.unmatched)
+        stiffness = elastic_stiffness(modes, mass_modes, model.points, o.free_motion)
+        kappa, spring = springs(field, k_abs, consistent=o.loads == "consistent"
+                                and spread is None)
+        K_mod = stiffness + (spring if o.scheme == "implicit" else 0.0)
+        newmark = Newmark(K_mod, damping_matrix(o.damping, K_mod, spring), o.dt / w_ref,
+                          o.alpha, o.delta)
+        return cls(source=source, target=target, pairs=pairs, options=o, reduced=reduced,
+                   model=model, n_modes=n_modes, modes=modes, mass_modes=mass_modes,
+                   field=field, spread=spread, k_ref=k_ref, k_abs=k_abs, source_n=X1,
+                   target_n=Y, loads=loads, pulled=loads.pairs, stiffness=stiffness,
+                   kappa=kappa, newmark=newmark)
+
+    @property
+    def size(self) -> float:
+        """The model's length unit in the user's units (its shape's RMS radius)."""
+        return self.reduced.size
+
+    def shape(self, x: np.ndarray) -> np.ndarray:
+        """The nodes (m, d), normalised, at modal coordinates ``x``: ``X_1 + Phi x``."""
+        return self.source_n + nodes(self.field.dot(x), self.source.dim)
+
+    def modal_load(self, u: np.ndarray) -> np.ndarray:
+        """The springs' load (19) in modal coordinates, ``Phi^T R``, for the stretch
+        ``u = T - X`` (d*m,)."""
+        if self.kappa is not None:  # consistent: kappa Phi^T M (T - X)
+            return self.kappa * (self.mass_modes.T @ u)
+        return self.k_abs * self.field.tdot(u)
+
+    def initial_coordinates(self, targets: np.ndarray) -> np.ndarray:
+        """``x^0`` (17), (21): ``U^0 = c_x (T^0 - X_1)`` in modal coordinates,
+        ``Phi^T M U^0``, or with a reduced model the least-squares fit of the field."""
+        c_x = self.options.c_x
+        U0 = c_x * flat(targets - self.source_n)  # (21): U0 = (c_x / k) R0
+        if c_x == 0:
+            return np.zeros(len(self.modes.eigenvalues))
+        if self.spread is None:
+            return self.mass_modes.T @ U0
+        return np.linalg.lstsq(self.field.dense(), U0, rcond=None)[0]
+
+    def energies(self, x: np.ndarray) -> tuple[float, np.ndarray]:
+        """The strain energy (22) at ``x`` and its share at every node (25), in units of
+        ``k_ref L^2``: ``x^T K_el x`` and ``u . (K U)`` with ``K U = M Phi K_el x``."""
+        k_ref, K_el = self.k_ref, self.stiffness
+        energy = float(x @ K_el @ x) / k_ref  # (22), x^T (Phi^T K Phi) x
+        e = node_energy(self.modes.shapes @ x, self.mass_modes @ (K_el @ x),
+                        self.source.dim) / k_ref  # (25), model nodes
+        return energy, (e if self.spread is None else self.spread @ e)
+
+    def resolved(self) -> Resolved:
+        """The values resolved from the options (sigma, modes, model nodes, solver)."""
+        return Resolved(sigma=self.model.sigma, modes=self.n_modes,
+                        model_nodes=self.model.m, solver=self.model.solver)
+
+
+def _nodal_field(model: FEModel, modes: Modes, points: np.ndarray, reduced: bool):
+    """``Phi`` at the source's nodes ``points`` and, for a reduced model, the spread of
+    each model node's energy over them (its field ``g_k`` at them, normalised)."""
+    if not reduced:
+        return Field(modes.shapes, model.dim), None
+    g_eval = model.field(points)  # u(x) = sum_k g_k(x) psi_k (1)-(4), truncated like G
+    return Field(modes.gaussian, model.dim, g_eval), g_eval / g_eval.sum(axis=0)
+
+
+def elastic_stiffness(modes: Modes, mass_modes: np.ndarray, points: np.ndarray,
+                      free_motion: str) -> np.ndarray:
+    """The elastic stiffness in modal coordinates: ``Omega^2`` (13), or with the
+    similarity motions of the model's nodes ``points`` free (``"similarity"``)."""
+    if free_motion == "none":
+        return np.diag(modes.eigenvalues)
+    return similarity_free(modes.frequencies, mass_modes.T @ similarity_fields(points))
+
+
+def similarity_free(frequencies: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Modal stiffness with the similarity motions free: ``min_a (U - S a)^T K (U - S a)``.
+
+    ``B = Phi^T M S`` (n, s) are the modal coordinates of the similarity fields ``S``.
+    The elastic energy of ``U = Phi x`` less that of its best-fitting similarity part is
+    ``x^T Omega (I - P) Omega x`` with ``P`` the projector onto the columns of
+    ``Omega B``: positive semi-definite, zero on similarity motions.
+    """
+    W = frequencies[:, None] * B
+    U, sv, _ = np.linalg.svd(W, full_matrices=False)
+    OmU = frequencies[:, None] * U[:, sv > RANK_TOL * sv.max()]
+    K = np.diag(frequencies**2) - OmU @ OmU.T
+    return (K + K.T) / 2
+
+
+def springs(field: Field, k_abs: float, *, consistent: bool):
+    """The springs (19) in modal coordinates, ``(kappa, spring matrix)``: nodal,
+    ``Phi^T R = k Phi^T (T - X)`` (kappa None); consistent, ``kappa x_T`` with ``x_T``
+    the modes' fit of ``T - X`` and ``kappa`` their mean stiffness."""
+    PtP = field.gram()
+    if consistent:  # x_T = Phi^T M (T - X)
+        kappa = k_abs * np.trace(PtP) / len(PtP)
+        return kappa, kappa * np.eye(len(PtP))
+    return None, k_abs * PtP
+
+
+def damping_matrix(damping, K_mod: np.ndarray, spring: np.ndarray) -> np.ndarray:
+    """``C_mod = a I + b K_mod`` (5) on the loaded model, by one of the two rules.
+
+    ``damping=(xi_1, xi_2)``: the paper's, the ratios at the loaded model's lowest and
+    highest frequencies (:func:`~modalmorph.rayleigh`). ``damping=xi``: ``b = 2 xi / w_s``
+    with ``w_s^2`` the springs' mean modal stiffness, so that a mode of loaded frequency
+    ``w >= w_s`` has the ratio ``xi w / w_s``: overdamped modes then creep towards the
+    target at nearly one rate (``~1 / b``), and the shape moves along nearly straight
+    paths, with no mode racing ahead (ripples, folds); ``a`` lifts the softest loaded
+    mode to ``xi`` when it lies below ``w_s`` (method.md §4).
+    """
+    n = len(K_mod)
+    w_lo, w_hi = frequency_range(K_mod, highest=np.ndim(damping) > 0)
+    if np.ndim(damping) == 0:  # every mode approaches at nearly the springs' one rate
+        xi, w_s = float(damping), np.sqrt(np.trace(spring) / n)
+        b = 2 * xi / w_s
+        a = max(0.0, 2 * w_lo * (xi - b * w_lo / 2))
+    else:  # (5) through two ratios, as the paper
+        a, b = rayleigh(*damping, w_lo, w_hi)
+    return a * np.eye(n) + b * K_mod
+
+
+def frequency_range(K_mod: np.ndarray, *, highest: bool = True):
+    """The lowest and (when ``highest``) the highest frequency of the loaded model."""
+    if not highest:  # only the lowest eigenvalue: 3x faster at 140 modes
+        ev = linalg.eigh(K_mod, eigvals_only=True, subset_by_index=(0, 0), driver="evr")
+        return np.sqrt(max(ev[0], 0.0)), None
+    ev = np.linalg.eigvalsh(K_mod)
+    hi = np.sqrt(ev[-1])
+    lo = np.sqrt(max(ev[0], 0.0))
+    return min(lo, hi * (1 - 1e-9)), hi
