@@ -36,7 +36,7 @@ __all__ = [
     "MatchOptions", "MorphOptions", "ReadOptions", "OutputOptions", "TrackOptions",
     "OPTION_CLASSES", "REFERENCES", "CORRESPONDENCES", "flat_fields", "parameters", "split",
     "split_overrides", "parse_value", "METHODS", "ROTATIONS", "FREE_MOTIONS", "LOADS",
-    "SCHEMES", "OBJECTS", "FRAME_SPACINGS", "K_RANGE", "DT_RANGE", "C_MAX",
+    "SCHEMES", "OBJECTS", "FRAME_SPACINGS", "STEP_MESHES", "K_RANGE", "DT_RANGE", "C_MAX",
 ]
 
 METHODS = ("auto", "local", "global")
@@ -46,6 +46,7 @@ LOADS = ("consistent", "nodal")
 SCHEMES = ("implicit", "explicit")
 OBJECTS = ("largest", "center")  # or a label number of the image's objects
 FRAME_SPACINGS = ("time", "path")
+STEP_MESHES = ("none", "ply", "obj")  # OutputOptions.meshes
 REFERENCES = ("previous", "first")
 CORRESPONDENCES = ("nearest", "modal")
 # Option ranges beyond which the integration is meaningless or overflows (the fuzz suite
@@ -296,6 +297,11 @@ class OutputOptions(_Options):
                      kind="bool")
     vtk: bool = _opt(False, "also a VTK time series (.vtu + .pvd) for ParaView",
                      group="outputs", kind="bool")
+    gltf: bool = _opt(False, "also morph.glb: one animated glTF 2.0 file (a morph target per "
+                      "step) for Blender, three.js and other 3D viewers", group="outputs",
+                      kind="bool")
+    meshes: str = _opt("none", "also the shape at every step as a mesh file in meshes/: "
+                       "ply, obj or none", group="outputs", kind="str", choices=STEP_MESHES)
     html: bool = _opt(False, "also report.html: the interactive viewer in one "
                       "self-contained file", group="outputs", kind="bool")
     background: bool = _opt(True, "draw shapes read from an image over that image",

@@ -25,6 +25,8 @@ from ..io import (
     read_shape,
     save_result,
     save_track,
+    write_gltf,
+    write_step_meshes,
     write_vtk_series,
 )
 from ..matching import match
@@ -217,6 +219,10 @@ def write_morph(result, folder: Path, settings: Settings, *, inputs=(), images=N
                 figures.animate(result, folder / name, **look)
     if output.vtk:
         write_vtk_series(result, folder / "vtk")
+    if output.gltf:
+        write_gltf(result, folder / "morph.glb")
+    if output.meshes != "none":
+        write_step_meshes(result, folder / "meshes", fmt=output.meshes)
     if output.html:
         title = None if images is None else f"{images[0].name} → {images[1].name}"
         write_html(result, folder / "report.html", title=title,
@@ -232,8 +238,9 @@ def track_files(inputs, out, settings: Settings | None = None, *, progress=None)
     """
     settings = settings or Settings()
     output, seq = settings.output, settings.sequence
-    if output.vtk or output.html:
-        raise OptionError("track writes no VTK or HTML report: leave out --vtk and --html")
+    if output.vtk or output.html or output.gltf or output.meshes != "none":
+        raise OptionError("track writes no VTK, glTF, per-step meshes or HTML report: "
+                          "leave out --vtk, --gltf, --meshes and --html")
     check_tools(output)
     out = Path(out)
     with atomic_output_dir(out) as tmp:

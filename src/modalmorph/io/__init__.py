@@ -19,8 +19,10 @@ Each module's docstring says what it reads, in detail. SVG and images need svgel
 scikit-image and pillow, meshes meshio (dependencies of modalmorph, imported when read).
 The other modules: :mod:`.sequences` (the frames of :func:`read_frames`), :mod:`.results`
 (:func:`save_result`, :func:`save_track`), :mod:`.atomic` (atomic output, used by every
-writer), :mod:`.vtk` (:func:`write_vtk_series`), :mod:`.guard` (the read's deadline and
-errors) and :mod:`.base` (:class:`~.base.RawShape`, what every reader returns).
+writer), :mod:`.vtk` (:func:`write_vtk_series`), :mod:`.gltf` (:func:`write_gltf`: an
+animated glTF 2.0 file), :mod:`.steps` (:func:`write_step_meshes`: PLY or OBJ per step),
+:mod:`.guard` (the read's deadline and errors) and :mod:`.base`
+(:class:`~.base.RawShape`, what every reader returns).
 
 Every problem with a file is an :class:`~modalmorph.errors.InputFileError` (a
 ``ValueError``) whose message starts with the file's name, so the command line can print
@@ -60,12 +62,14 @@ from .atomic import (
     remove_leftovers,
 )
 from .base import DEFAULT_NODES, RawShape, Reader, make_shape
+from .gltf import write_gltf
 from .guard import READ_SECONDS, guarded, read_guarded
 from .images import INSIDE_FRACTION, MAX_PARTIAL_ALPHA, MIN_OBJECT_PIXELS, read_image
 from .meshes import read_mesh
 from .points import read_json, read_npy, read_npz, read_text, write_points
 from .results import result_summary, save_result, save_track
 from .sequences import Frames, file_frames, sequence_files
+from .steps import MESH_FORMATS, write_step_meshes
 from .svg import SVG_FRAME, read_svg
 from .vtk import write_vtk_series
 
@@ -74,6 +78,7 @@ __all__ = [
     "Frames",
     "INSIDE_FRACTION",
     "MAX_PARTIAL_ALPHA",
+    "MESH_FORMATS",
     "MIN_OBJECT_PIXELS",
     "OUTPUT_MARKER",
     "OUTPUT_MARKERS",
@@ -91,6 +96,8 @@ __all__ = [
     "save_result",
     "save_track",
     "write_points",
+    "write_gltf",
+    "write_step_meshes",
     "write_vtk_series",
 ]
 
