@@ -2,6 +2,8 @@
 on warped, turned, subsampled, shuffled copies with a known ground truth."""
 
 import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
 from scipy.spatial import cKDTree
 
 import modalmorph as mm
@@ -45,3 +47,58 @@ def test_matcher_driven_morph_converges():
     assert r.converged, r.message
     assert max(both_ways(r.shapes[-1], tgt)) < END_SPACINGS
     assert r.distance <= 0.005 * mm.Shape(tgt).size
+
+
+def icosphere(subdivisions):
+    """trimesh's icosphere of radius 1: (points, faces), 162 vertices at 2, 642 at 3."""
+    trimesh = pytest.importorskip("trimesh")
+    mesh = trimesh.creation.icosphere(subdivisions)
+    return np.asarray(mesh.vertices), np.asarray(mesh.faces)
+
+
+def test_coarse_mesh_onto_a_finer_one_converges():
+    """An icosphere of 162 vertices onto an ellipsoid of 642 (issue 25): the shape lies on
+    the target as closely as 162 points can, and the stop test knows it (it used to stop
+    at equilibrium, 7 times the tolerance away)."""
+    a, fa = icosphere(2)
+    b, fb = icosphere(3)
+    src, tgt = mm.Shape(a, faces=fa), mm.Shape(b * [1.3, 1.0, 0.8], faces=fb)
+    r = mm.morph(src, tgt)
+    assert r.converged, r.message
+    assert len(r.self_intersections) == r.steps + 1  # checked at every step, when it can be
+    assert not np.any(r.self_intersections)
+
+
+def test_surface_stop_knows_the_source_resolution():
+    """A source at least as fine as the target adds nothing (the measure is as before);
+    a coarser one is allowed what ``m`` points spread over the target leave."""
+    from modalmorph.simulation.stop import Limits, SurfaceStop, even_subset
+
+    b, _ = icosphere(3)
+    limits = Limits(tolerance=0.005, at_rest=0.0, stall=False, max_steps=10)
+    assert SurfaceStop(limits, b, m=len(b)).coarse == 0.0
+    assert SurfaceStop(limits, b, m=2 * len(b)).coarse == 0.0
+    coarse = SurfaceStop(limits, b, m=162)
+    assert coarse.coarse > 0
+    a, _ = icosphere(2)  # the coarse sphere, exactly on the target: within the tolerance
+    assert coarse.distance(a, 0.0, lazy=False) <= limits.tolerance
+    idx = even_subset(b, 162)
+    assert_array_equal(idx, even_subset(b, 162))  # deterministic
+    assert abs(len(idx) - 162) <= 0.1 * 162 and np.all(np.diff(idx) > 0)
+
+
+def test_self_intersections_found_and_said():
+    """A vertex pushed through the far side of a sphere makes its faces cut the surface;
+    the sphere alone has none; the sentence names the steps."""
+    pytest.importorskip("pymeshlab")
+    from modalmorph.core.surfaces import intersection_sentence, self_intersecting_faces
+
+    b, fb = icosphere(3)
+    assert self_intersecting_faces(b, fb) == 0
+    spiked = b.copy()
+    spiked[0] *= -1.2  # through the sphere and out on the far side
+    assert self_intersecting_faces(spiked, fb) > 0
+    assert intersection_sentence(np.array([0, 0, 0])) == ""
+    assert intersection_sentence(None) == ""
+    assert intersection_sentence(np.array([0, 4, 0, 2])) == (
+        "; 2 of 4 steps' surfaces intersect themselves (up to 4 faces, first at step 1)")

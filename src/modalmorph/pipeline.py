@@ -35,9 +35,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
+
 from .core.align import Similarity, align
 from .core.quality import check_simple
 from .core.shape import Shape, as_shape
+from .core.surfaces import intersection_sentence, step_self_intersections
 from .errors import MorphDivergedError, OptionError, ShapeError
 from .matching import Matching, match
 from .options import MatchOptions, MorphOptions, split_overrides
@@ -67,6 +70,11 @@ class Morph(Run):
         The options of the physical model and the time integration.
     match_options : MatchOptions or None
         The matcher's options (None for given pairs).
+    self_intersections : ndarray of int, shape (T+1,), or None
+        For surfaces (a source with faces): the number of the surface's triangles that
+        cut another of its triangles, at every step (:mod:`modalmorph.core.surfaces`;
+        ``message`` says so when any is not 0). None for other objects, or when
+        pymeshlab, which finds them, is not installed.
     """
 
     matching: Matching
@@ -75,6 +83,7 @@ class Morph(Run):
     target: Shape
     options: MorphOptions
     match_options: MatchOptions | None = None
+    self_intersections: np.ndarray | None = None
 
 
 def morph(source, target, *, matching=None, options: MorphOptions | None = None,
@@ -139,8 +148,13 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
             similarity = align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]], scale=True)
             work = src.with_points(similarity.apply(src.points))
         run = Simulation(work, tgt, pairs, options).run(progress).result()
-    return Morph(**vars(run), matching=matching, similarity=similarity, source=src,
-                 target=tgt, options=options, match_options=match_options)
+    crossed = None
+    if src.dim == 3 and src.faces is not None and len(src.faces):
+        crossed = step_self_intersections(run.shapes, src.faces)
+    fields = {**vars(run), "message": run.message + intersection_sentence(crossed)}
+    return Morph(**fields, matching=matching, similarity=similarity, source=src,
+                 target=tgt, options=options, match_options=match_options,
+                 self_intersections=crossed)
 
 
 def _options(options, matching, overrides: dict) -> tuple[MorphOptions, MatchOptions]:

@@ -86,8 +86,9 @@ def result_summary(morph, *, options: dict | None = None, inputs: list | None = 
           "target_nodes": int,            # n
           "dim": int,                     # 2 or 3
           "mean_distance": [float, ...],  # T + 1 values, per step (step 0 = source)
-          "energy": [float, ...]          # T + 1 values, strain energy per step
-        }
+          "energy": [float, ...],         # T + 1 values, strain energy per step
+          "self_intersections": [int, ...] or null  # surfaces: faces cutting another
+        }                                           # face, per step (null: not checked)
     """
     return {
         "modalmorph_version": __version__,
@@ -106,11 +107,16 @@ def result_summary(morph, *, options: dict | None = None, inputs: list | None = 
         "dim": int(morph.source.dim),
         "mean_distance": _finite_or_none(morph.mean_distance),
         "energy": _finite_or_none(morph.energy),
+        "self_intersections": _counts_or_none(getattr(morph, "self_intersections", None)),
     }
 
 
 def _pairs_array(morph) -> np.ndarray:
     return morph.matching.pairs
+
+
+def _counts_or_none(counts) -> list | None:
+    return None if counts is None else [int(c) for c in counts]
 
 
 def _finite_or_none(values) -> list:

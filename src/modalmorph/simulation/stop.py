@@ -20,13 +20,15 @@ from ..core.quality import Polyline
 from ..core.shape import Shape, resample
 from ..options import MorphOptions
 
-__all__ = ["CurveStop", "LAZY_SPACINGS", "Limits", "PLANE", "PairStop", "STALL",
-           "STALL_GAIN", "StopTest", "SurfaceStop", "choose_stop_test", "to_surface"]
+__all__ = ["CurveStop", "GRID_ROUNDS", "LAZY_SPACINGS", "Limits", "PLANE", "PairStop", "STALL",
+           "STALL_GAIN", "StopTest", "SurfaceStop", "choose_stop_test", "even_subset",
+           "to_surface"]
 
 STALL = 5  # steps over which a stalled distance means equilibrium (method.md §5)
 STALL_GAIN = 1e-3  # the least relative gain of the pulled pairs' distance over STALL steps
 PLANE = 8  # nearest points whose least-squares plane is the surface (method.md §5)
 LAZY_SPACINGS = 4  # surfaces measured within the tolerance plus this many spacings (§5)
+GRID_ROUNDS = 6  # cell sizes even_subset tries: within 10 % of m on icospheres (§5)
 
 
 @dataclass(frozen=True)
@@ -133,18 +135,27 @@ class CurveStop(StopTest):
 class SurfaceStop(StopTest):
     """3D point sets and surfaces: the larger of the mean distances both ways between the
     shape's nodes and the other's surface (:func:`to_surface`), less the target's own
-    roughness ``floor`` (0 at least). With ``lazy`` the surfaces are measured only once
-    ``near`` is within ``gate``, the tolerance plus ``LAZY_SPACINGS`` target spacings."""
+    roughness ``floor`` (0 at least). A source of ``m`` nodes, fewer than the target's,
+    cannot follow the target more closely than ``m`` points spread over it do: the
+    target's distance to the shape's surface is measured less ``coarse``, what such a
+    sample (:func:`even_subset`) leaves beyond ``floor``. With ``lazy`` the surfaces are
+    measured only once ``near`` is within ``gate``, the tolerance plus ``LAZY_SPACINGS``
+    target spacings."""
 
     lazy = True
 
-    def __init__(self, limits: Limits, target: np.ndarray):
+    def __init__(self, limits: Limits, target: np.ndarray, *, m: int | None = None):
         super().__init__(limits)
         self.target = target
         self.tree = cKDTree(target)
         self.floor = float(to_surface(target, target, self.tree, skip=1).mean())
         spacing = self.tree.query(target, k=2)[0][:, 1].mean()
         self.gate = limits.tolerance + LAZY_SPACINGS * spacing
+        self.coarse = 0.0
+        if m is not None and PLANE < m < len(target):  # a source coarser than the target
+            sample = target[even_subset(target, m)]
+            left = float(to_surface(target, sample, cKDTree(sample)).mean())
+            self.coarse = max(left - self.floor, 0.0)
 
     def distance(self, current: np.ndarray, near: float, lazy: bool = True) -> float:
         if lazy and near > self.gate:
@@ -152,7 +163,7 @@ class SurfaceStop(StopTest):
         Y = self.target
         d_ab = to_surface(current, Y, self.tree).mean()
         d_ba = to_surface(Y, current, cKDTree(current)).mean()
-        return max(float(d_ab), float(d_ba), self.floor) - self.floor
+        return max(float(d_ab), float(d_ba) - self.coarse, self.floor) - self.floor
 
 
 def choose_stop_test(source: Shape, target: Shape, target_n: np.ndarray,
@@ -162,7 +173,7 @@ def choose_stop_test(source: Shape, target: Shape, target_n: np.ndarray,
         return CurveStop(limits, target_n, closed=source.closed,
                          target_closed=target.closed, m=source.m)
     if source.dim == 3 and min(source.m, target.m) > PLANE:
-        return SurfaceStop(limits, target_n)
+        return SurfaceStop(limits, target_n, m=source.m)
     return PairStop(limits)
 
 
@@ -177,3 +188,35 @@ def to_surface(points: np.ndarray, cloud: np.ndarray, tree: cKDTree,
     spread = near - centre[:, None]
     normal = np.linalg.eigh(np.einsum("pki,pkj->pij", spread, spread))[1][:, :, 0]
     return np.abs(np.einsum("pi,pi->p", normal, points - centre))
+
+
+def even_subset(points: np.ndarray, m: int) -> np.ndarray:
+    """Indices of about ``m`` of ``points`` (n, d) spread evenly over them, ascending: the
+    point nearest the centre of each occupied cell of a cubic grid, of the ``GRID_ROUNDS``
+    cell sizes tried (each corrected towards ``m`` occupied cells: a surface's count of
+    cells falls as the square of their size) the one nearest ``m``. Deterministic,
+    O(n log n)."""
+    n = len(points)
+    if m >= n:
+        return np.arange(n)
+    low = points.min(axis=0)
+    extent = float(np.max(points.max(axis=0) - low)) or 1.0
+    cell = extent / np.sqrt(m)
+    tried = []  # (|count - m|, cell)
+    for _ in range(GRID_ROUNDS):
+        count = len(np.unique(_cell_keys(points, low, cell)[0]))
+        tried.append((abs(count - m), cell))
+        cell *= np.sqrt(count / m)
+    keys, grid = _cell_keys(points, low, min(tried)[1])
+    offset = np.linalg.norm(grid - np.floor(grid) - 0.5, axis=1)
+    order = np.lexsort((offset, keys))  # by cell, the point nearest its centre first
+    first = np.r_[True, np.diff(keys[order]) != 0]
+    return np.sort(order[first])
+
+
+def _cell_keys(points: np.ndarray, low: np.ndarray, cell: float):
+    """One integer per point naming its grid cell, and the points in cell units."""
+    grid = (points - low) / cell
+    index = np.floor(grid).astype(np.int64)
+    span = index.max(axis=0) + 1
+    return np.ravel_multi_index(index.T, span), grid
