@@ -151,7 +151,8 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
     crossed = None
     if src.dim == 3 and src.faces is not None and len(src.faces):
         crossed = step_self_intersections(run.shapes, src.faces)
-    fields = {**vars(run), "message": run.message + intersection_sentence(crossed)}
+    said = intersection_sentence(crossed, model_nodes=run.resolved.model_nodes, nodes=src.m)
+    fields = {**vars(run), "message": run.message + said}
     return Morph(**fields, matching=matching, similarity=similarity, source=src,
                  target=tgt, options=options, match_options=match_options,
                  self_intersections=crossed)

@@ -59,12 +59,18 @@ def step_self_intersections(shapes, faces) -> np.ndarray | None:
                     dtype=np.int64)
 
 
-def intersection_sentence(counts) -> str:
+def intersection_sentence(counts, *, model_nodes: int | None = None,
+                          nodes: int | None = None) -> str:
     """What a morph's message adds about its self-intersections: nothing when none of its
-    steps has any (or they were not checked)."""
+    steps has any (or they were not checked); with a reduced model (``model_nodes`` <
+    ``nodes``), the hint to model every node, which avoided them on the bunny (method.md
+    §5)."""
     if counts is None or not np.any(counts):
         return ""
     counts = np.asarray(counts)
     steps = np.flatnonzero(counts)  # step 0: the source itself
+    hint = (f"; model_nodes={nodes} (a model of every node, not {model_nodes}) may avoid "
+            f"them" if model_nodes is not None and nodes is not None and model_nodes < nodes
+            else "")
     return (f"; {len(steps)} of {len(counts)} steps' surfaces intersect themselves "
-            f"(up to {counts.max()} faces, first at step {steps[0]})")
+            f"(up to {counts.max()} faces, first at step {steps[0]}){hint}")

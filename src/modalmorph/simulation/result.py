@@ -72,8 +72,9 @@ class Run:
         target points: what a sample of the target surface leaves; 0 when below), so that
         pairs right only to about a node spacing do not keep a shape lying on the target
         from converging; measured once the pulled pairs are within the tolerance plus 4
-        target spacings. Other point sets (2D, or of at most 8 points): the mean distance
-        of the nodes pulled to partners.
+        target spacings; a source coarser than the target is allowed, the second way,
+        what as many target points spread evenly leave. Other point sets (2D, or of at
+        most 8 points): the mean distance of the nodes pulled to partners.
     tolerance : float
         The stop test's tolerance, in the user's units (``tol`` times the target's RMS
         radius, or ``tol_distance``).
