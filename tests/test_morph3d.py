@@ -72,7 +72,8 @@ def test_coarse_mesh_onto_a_finer_one_converges():
 def test_surface_stop_knows_the_source_resolution():
     """A source at least as fine as the target adds nothing (the measure is as before);
     a coarser one is allowed what ``m`` points spread over the target leave."""
-    from modalmorph.simulation.stop import Limits, SurfaceStop, even_subset
+    from modalmorph.core.shape import even_subset
+    from modalmorph.simulation.stop import Limits, SurfaceStop
 
     b, _ = icosphere(3)
     limits = Limits(tolerance=0.005, at_rest=0.0, stall=False, max_steps=10)

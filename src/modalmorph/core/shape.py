@@ -10,8 +10,8 @@ from scipy.spatial import cKDTree
 
 from ..errors import ShapeError
 
-__all__ = ["ImageFrame", "Shape", "as_shape", "check_pairs", "coarsen", "resample",
-           "spread_indices"]
+__all__ = ["ImageFrame", "Shape", "as_shape", "check_pairs", "coarsen", "even_subset",
+           "resample", "spread_indices", "GRID_ROUNDS", "HUGE", "FPS_POOL"]
 
 # Two nodes closer than this fraction of the object's RMS radius are "the same node".
 _REPEAT_TOL = 1e-9
@@ -20,6 +20,9 @@ _REPEAT_TOL = 1e-9
 MAX_COORDINATE = 1e150
 # An object whose RMS radius is below this fraction of its coordinates' magnitude is a point.
 _POINT_TOL = 1e-10
+GRID_ROUNDS = 6  # cell sizes even_subset tries: within 10 % of m on icospheres (method.md §5)
+HUGE = 200_000  # unordered sets above this: farthest points among an even_subset (§7)
+FPS_POOL = 20  # its candidates per point chosen (§7)
 
 
 @dataclass(frozen=True)
@@ -235,7 +238,8 @@ def spread_indices(shape: Shape, n: int) -> np.ndarray:
     """Indices of at most ``n`` nodes spread evenly over a shape, ascending.
 
     Ordered shapes: evenly along the order. Unordered point sets: farthest-point sampling
-    from the node nearest the centroid (deterministic).
+    from the node nearest the centroid (deterministic), among the ``FPS_POOL * n`` nodes
+    of :func:`even_subset` above ``HUGE`` nodes (its cost is then linear in ``m``).
     """
     m = shape.m
     if m <= n:
@@ -243,13 +247,49 @@ def spread_indices(shape: Shape, n: int) -> np.ndarray:
     if shape.ordered:
         return np.unique(np.linspace(0, m, n, endpoint=not shape.closed).astype(np.intp) % m)
     x = shape.normalized
+    pool = None
+    if m > HUGE and m > FPS_POOL * n:  # linear cost, not m n: among an even subset
+        pool = even_subset(x, FPS_POOL * n)
+        x = x[pool]
     chosen = np.empty(n, dtype=np.intp)
     chosen[0] = np.argmin(np.sum(x**2, axis=1))
     dist = np.sum((x - x[chosen[0]]) ** 2, axis=1)
     for i in range(1, n):
         chosen[i] = np.argmax(dist)
         dist = np.minimum(dist, np.sum((x - x[chosen[i]]) ** 2, axis=1))
-    return np.sort(chosen)
+    return np.sort(chosen if pool is None else pool[chosen])
+
+
+def even_subset(points: np.ndarray, m: int) -> np.ndarray:
+    """Indices of about ``m`` of ``points`` (n, d) spread evenly over them, ascending: the
+    point nearest the centre of each occupied cell of a cubic grid, of the ``GRID_ROUNDS``
+    cell sizes tried (each corrected towards ``m`` occupied cells: a surface's count of
+    cells falls as the square of their size) the one nearest ``m``. Deterministic,
+    O(n log n)."""
+    n = len(points)
+    if m >= n:
+        return np.arange(n)
+    low = points.min(axis=0)
+    extent = float(np.max(points.max(axis=0) - low)) or 1.0
+    cell = extent / np.sqrt(m)
+    tried = []  # (|count - m|, cell)
+    for _ in range(GRID_ROUNDS):
+        count = len(np.unique(_cell_keys(points, low, cell)[0]))
+        tried.append((abs(count - m), cell))
+        cell *= np.sqrt(count / m)
+    keys, grid = _cell_keys(points, low, min(tried)[1])
+    offset = np.linalg.norm(grid - np.floor(grid) - 0.5, axis=1)
+    order = np.lexsort((offset, keys))  # by cell, the point nearest its centre first
+    first = np.r_[True, np.diff(keys[order]) != 0]
+    return np.sort(order[first])
+
+
+def _cell_keys(points: np.ndarray, low: np.ndarray, cell: float):
+    """One integer per point naming its grid cell, and the points in cell units."""
+    grid = (points - low) / cell
+    index = np.floor(grid).astype(np.int64)
+    span = index.max(axis=0) + 1
+    return np.ravel_multi_index(index.T, span), grid
 
 
 def coarsen(shape: Shape, n: int) -> Shape:

@@ -21,6 +21,7 @@ from scipy.sparse import coo_matrix, csr_matrix, diags
 from scipy.spatial import cKDTree
 
 from ..core.align import align
+from ..threads import blas_threads
 
 __all__ = ["refine"]
 
@@ -38,9 +39,12 @@ _AVERAGE_PASSES = 4  # passes of that average (measured together with _AVERAGE)
 
 
 def _cells(p: np.ndarray, width: float) -> np.ndarray:
-    """The label of the cube of a grid of side ``width`` holding each point, (k,)."""
-    _, label = np.unique(np.floor(p / width).astype(np.int64), axis=0, return_inverse=True)
-    return label.ravel()
+    """The label of the cube of a grid of side ``width`` holding each point, (k,): the
+    cubes numbered in the lexicographic order of their integer coordinates."""
+    index = np.floor(p / width).astype(np.int64)
+    index -= index.min(axis=0)
+    key = np.ravel_multi_index(index.T, index.max(axis=0) + 1)  # same order, one integer
+    return np.unique(key, return_inverse=True)[1].ravel()
 
 
 def _means(label: np.ndarray, p: np.ndarray, weight: np.ndarray | None = None
@@ -85,8 +89,9 @@ def _transport(z: np.ndarray, mu: np.ndarray, y: np.ndarray, nu: np.ndarray,
     which slides it along the surface where nearest points alone would not."""
     s, t = len(z), len(y)
     k = min(_NEIGHBOURS, s, t)
-    d1, j1 = cKDTree(y).query(z, k=k)
-    d2, i2 = cKDTree(z).query(y, k=k)
+    workers = blas_threads(max(s, t))  # the cores the thread policy gives (same result)
+    d1, j1 = cKDTree(y).query(z, k=k, workers=workers)
+    d2, i2 = cKDTree(z).query(y, k=k, workers=workers)
     rows = np.r_[np.repeat(np.arange(s), k), i2.ravel()]
     cols = np.r_[j1.ravel(), np.repeat(np.arange(t), k)]
     dist = np.r_[d1.ravel(), d2.ravel()]

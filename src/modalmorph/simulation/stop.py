@@ -17,18 +17,16 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..core.quality import Polyline
-from ..core.shape import Shape, resample
+from ..core.shape import Shape, even_subset, resample
 from ..options import MorphOptions
 
-__all__ = ["CurveStop", "GRID_ROUNDS", "LAZY_SPACINGS", "Limits", "PLANE", "PairStop", "STALL",
-           "STALL_GAIN", "StopTest", "SurfaceStop", "choose_stop_test", "even_subset",
-           "to_surface"]
+__all__ = ["CurveStop", "LAZY_SPACINGS", "Limits", "PLANE", "PairStop", "STALL",
+           "STALL_GAIN", "StopTest", "SurfaceStop", "choose_stop_test", "to_surface"]
 
 STALL = 5  # steps over which a stalled distance means equilibrium (method.md §5)
 STALL_GAIN = 1e-3  # the least relative gain of the pulled pairs' distance over STALL steps
 PLANE = 8  # nearest points whose least-squares plane is the surface (method.md §5)
 LAZY_SPACINGS = 4  # surfaces measured within the tolerance plus this many spacings (§5)
-GRID_ROUNDS = 6  # cell sizes even_subset tries: within 10 % of m on icospheres (§5)
 
 
 @dataclass(frozen=True)
@@ -188,35 +186,3 @@ def to_surface(points: np.ndarray, cloud: np.ndarray, tree: cKDTree,
     spread = near - centre[:, None]
     normal = np.linalg.eigh(np.einsum("pki,pkj->pij", spread, spread))[1][:, :, 0]
     return np.abs(np.einsum("pi,pi->p", normal, points - centre))
-
-
-def even_subset(points: np.ndarray, m: int) -> np.ndarray:
-    """Indices of about ``m`` of ``points`` (n, d) spread evenly over them, ascending: the
-    point nearest the centre of each occupied cell of a cubic grid, of the ``GRID_ROUNDS``
-    cell sizes tried (each corrected towards ``m`` occupied cells: a surface's count of
-    cells falls as the square of their size) the one nearest ``m``. Deterministic,
-    O(n log n)."""
-    n = len(points)
-    if m >= n:
-        return np.arange(n)
-    low = points.min(axis=0)
-    extent = float(np.max(points.max(axis=0) - low)) or 1.0
-    cell = extent / np.sqrt(m)
-    tried = []  # (|count - m|, cell)
-    for _ in range(GRID_ROUNDS):
-        count = len(np.unique(_cell_keys(points, low, cell)[0]))
-        tried.append((abs(count - m), cell))
-        cell *= np.sqrt(count / m)
-    keys, grid = _cell_keys(points, low, min(tried)[1])
-    offset = np.linalg.norm(grid - np.floor(grid) - 0.5, axis=1)
-    order = np.lexsort((offset, keys))  # by cell, the point nearest its centre first
-    first = np.r_[True, np.diff(keys[order]) != 0]
-    return np.sort(order[first])
-
-
-def _cell_keys(points: np.ndarray, low: np.ndarray, cell: float):
-    """One integer per point naming its grid cell, and the points in cell units."""
-    grid = (points - low) / cell
-    index = np.floor(grid).astype(np.int64)
-    span = index.max(axis=0) + 1
-    return np.ravel_multi_index(index.T, span), grid
