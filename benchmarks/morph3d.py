@@ -5,9 +5,10 @@ cases: steps, convergence and the end shape's distance to the target both ways.
         --angles 0 90 --noise 0 0.01 [--pairs matcher|true]
 
 ``--surfaces`` morphs meshes with faces instead (icospheres of trimesh onto finer or
-coarser ellipsoids, the bunny onto warped and turned copies of itself) and reports the
-self-intersections of every step's surface (faces cutting another face, pymeshlab): the
-largest count, the number of steps with any, and the counts per step.
+coarser turned ellipsoids, radii (1.3, 1, 0.8) or as named, the bunny onto warped and
+turned copies of itself) and reports the self-intersections of every step's surface
+(faces cutting another face, pymeshlab): the largest count, the number of steps with
+any, and the counts per step.
 
 Distances are mean nearest-point distances in % of the target's RMS radius ("size"): one
 target node spacing is about 4 % of the size at 2000 points and 1.3 % at 20 000, and with
@@ -50,12 +51,16 @@ def surface_cases():
     from scipy.spatial.transform import Rotation
 
     ico = {s: trimesh.creation.icosphere(s) for s in (2, 3, 4)}
-    ellipsoid = [1.3, 1.0, 0.8]
+    turn = Rotation.from_rotvec([0.3, -0.5, 0.4])
     cases = []
-    for a, b in ((2, 3), (3, 2), (2, 4), (3, 3)):
+    for a, b, radii in ((2, 3, (1.3, 1.0, 0.8)), (3, 2, (1.3, 1.0, 0.8)),
+                        (2, 4, (1.3, 1.0, 0.8)), (3, 3, (1.3, 1.0, 0.8)),
+                        (2, 3, (1.2, 1.0, 0.9)), (2, 3, (2.0, 1.0, 0.5))):
         src = mm.Shape(np.asarray(ico[a].vertices), faces=np.asarray(ico[a].faces))
-        tgt = mm.Shape(np.asarray(ico[b].vertices) * ellipsoid, faces=np.asarray(ico[b].faces))
-        cases.append((f"ico{src.m}->ell{tgt.m}", src, tgt))
+        tgt = mm.Shape(turn.apply(np.asarray(ico[b].vertices) * radii),
+                       faces=np.asarray(ico[b].faces))
+        cases.append((f"ico{src.m}->ell{tgt.m}" + ("" if radii[0] == 1.3 else f"x{radii[0]:g}"),
+                      src, tgt))
     points, faces = bunny_mesh()
     for angle in (0, 30, 90):
         rng = np.random.default_rng([1, angle])
