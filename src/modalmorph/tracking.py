@@ -167,7 +167,7 @@ def track(frames, *, options: TrackOptions | None = None,
     """
     opts = _track_options(options, overrides)
     match_opts = _match_options(match_options, opts.correspondence)
-    morph_opts = _morph_options(morph_options)
+    morph_opts = _as_options(morph_options, MorphOptions, "morph_options")
     shapes, names = _frames(frames, names, opts.start_node)
     step = partial(_morph_frame, names=names, match_options=match_opts,
                    morph_options=morph_opts)
@@ -222,30 +222,22 @@ def _match_options(value, correspondence: str) -> MatchOptions | None:
         return MatchOptions() if correspondence == "modal" else None
     if correspondence != "modal":
         raise OptionError("match_options apply to correspondence='modal' only")
-    if isinstance(value, MatchOptions):
-        return value
-    if not isinstance(value, dict):
-        raise OptionError(f"match_options must be a MatchOptions or a dict, "
-                          f"got {type(value).__name__}")
-    try:
-        return MatchOptions().replace(**value)
-    except OptionError as exc:
-        raise OptionError(f"match_options: {exc}") from None
+    return _as_options(value, MatchOptions, "match_options")
 
 
-def _morph_options(value) -> MorphOptions:
-    """The morph's options, from a MorphOptions or a dict of its fields."""
+def _as_options(value, cls, name: str):
+    """An option object of class ``cls`` from one, a dict of its fields, or None."""
     if value is None:
-        return MorphOptions()
-    if isinstance(value, MorphOptions):
+        return cls()
+    if isinstance(value, cls):
         return value
     if not isinstance(value, dict):
-        raise OptionError(f"morph_options must be a MorphOptions or a dict, "
+        raise OptionError(f"{name} must be a {cls.__name__} or a dict, "
                           f"got {type(value).__name__}")
     try:
-        return MorphOptions().replace(**value)
+        return cls().replace(**value)
     except OptionError as exc:
-        raise OptionError(f"morph_options: {exc}") from None
+        raise OptionError(f"{name}: {exc}") from None
 
 
 def _frames(frames, names, start_node) -> tuple[list, tuple]:
