@@ -48,10 +48,7 @@ OBJECTS = ("largest", "center")  # or a label number of the image's objects
 FRAME_SPACINGS = ("time", "path")
 REFERENCES = ("previous", "first")
 CORRESPONDENCES = ("nearest", "modal")
-# Option ranges beyond which the integration is meaningless or overflows (the fuzz suite
-# found dt = 1e-300 dividing by zero in Newmark's coefficients and c_x = 1e300 overflowing):
-# k and dt over 12 decades about their defaults; c_x, c_v are fractions of the way (17),
-# (18), where 1 already starts at the target.
+# Ranges beyond which the integration is meaningless or overflows (fuzz suite; method.md §4).
 K_RANGE = (1e-6, 1e6)
 DT_RANGE = (1e-6, 1e6)
 C_MAX = 10.0
