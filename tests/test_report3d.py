@@ -10,6 +10,7 @@ import base64
 import io
 import os
 import re
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 import modalmorph as mm
+from modalmorph.apps.app import make_server
 from modalmorph.apps.report import render_page, result_payload, write_html
 
 from .test_app import _browser_or_skip, _ready, _wait
@@ -174,3 +176,33 @@ def test_a_point_cloud_is_drawn_as_points(browser, cloud_result, tmp_path, shots
     browser.save_screenshot(str(shots / "report3d-cloud.png"))
     _drag(browser, -120, 0)
     assert np.any(np.abs(_canvas(browser) - pixels) > 30)
+
+
+def test_app_previews_a_mesh_and_keeps_an_uploads_refusal(browser, tmp_path, shots):
+    """A refused source file's message stays when the target is chosen; an OFF surface
+    uploaded to the app is previewed shaded."""
+    from selenium.webdriver.common.by import By
+
+    server = make_server("127.0.0.1", 0)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        bad = tmp_path / "two.csv"
+        bad.write_text("x,y\n0,0\n1,1\n")
+        p, f = sphere_mesh(120, np.random.default_rng(6))
+        mesh = tmp_path / "ball.off"
+        mesh.write_text(f"OFF\n{len(p)} {len(f)} 0\n" + "".join(f"{x} {y} {z}\n" for x, y, z in p)
+                        + "".join(f"3 {a} {b} {c}\n" for a, b, c in f))
+        browser.get(f"http://127.0.0.1:{server.server_address[1]}/")
+        _wait(browser, lambda b: b.execute_script("return !!App.schema"), "the app's form")
+        msg = browser.find_element(By.ID, "input-msg")
+        browser.find_element(By.ID, "file-source").send_keys(str(bad))
+        _wait(browser, lambda b: msg.text.startswith("source: two.csv"), "the refusal")
+        browser.find_element(By.ID, "file-target").send_keys(str(mesh))
+        _wait(browser, lambda b: _ready(b) == "preview", "the mesh previewed")
+        assert msg.text.startswith("source: two.csv") and "error" in msg.get_attribute("class")
+        assert browser.execute_script("return V3.shape.type") == "Mesh"
+        assert _drawn(_canvas(browser)).mean() > MIN_DRAWN
+        browser.save_screenshot(str(shots / "app3d-preview.png"))
+    finally:
+        server.shutdown()
+        server.server_close()
