@@ -206,3 +206,23 @@ def test_app_previews_a_mesh_and_keeps_an_uploads_refusal(browser, tmp_path, sho
     finally:
         server.shutdown()
         server.server_close()
+
+
+def test_3d_figures_keep_the_z_label_clear_of_the_colour_bar(surface_result):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+
+    from modalmorph import figures
+
+    for color_by in ("energy", "load"):
+        ax = figures.plot_shapes(surface_result, color_by=color_by)
+        fig = ax.figure
+        renderer = fig.canvas.get_renderer()
+        fig.canvas.draw()
+        z = ax.zaxis.label.get_window_extent(renderer)
+        bar = next(a for a in fig.axes if a is not ax).get_tightbbox(renderer)
+        assert z.x1 < bar.x0, (color_by, z, bar)  # left of the bar and its ticks
+        assert fig.bbox.contains(z.x0, z.y0) and fig.bbox.contains(z.x1, z.y1)
+    plt.close("all")
