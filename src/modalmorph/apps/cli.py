@@ -75,11 +75,11 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # argparse: --help, --version (0) or a usage error (2)
         return int(exc.code or 0)
+    fresh = not logging.getLogger().handlers  # else a host (pytest) owns the handlers
     logging.basicConfig(level=logging.WARNING if args.quiet else logging.INFO,
                         format="%(message)s")
-    for handler in logging.getLogger().handlers:
-        if not any(isinstance(f, _FlagFilter) for f in handler.filters):
-            handler.addFilter(_FlagFilter())
+    if fresh:  # log lines name flags, as the errors and warnings below
+        logging.getLogger().handlers[0].addFilter(_FlagFilter())
     # a morph short of its tolerance is said once, by the status line or the warning below
     logging.getLogger("modalmorph.simulation").setLevel(logging.WARNING)
     # Library warnings are collected, not printed as they come: after a successful run each

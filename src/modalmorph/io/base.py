@@ -45,9 +45,10 @@ def uneven_nodes(name: str, pts: np.ndarray, closed: bool) -> int | None:
     if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 3 or not np.isfinite(pts).all():
         return None  # make_shape says what is wrong
     path = np.vstack([pts, pts[:1]]) if closed else pts
-    edges = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    with np.errstate(over="ignore", invalid="ignore"):  # absurd sizes: Shape refuses them
+        edges = np.linalg.norm(np.diff(path, axis=0), axis=1)
     median = float(np.median(edges))
-    if median <= 0 or edges.max() <= UNEVEN_SPACING * median:
+    if not np.isfinite(edges).all() or median <= 0 or edges.max() <= UNEVEN_SPACING * median:
         return None
     nodes = max(DEFAULT_NODES, len(pts))
     _log.info("%s: uneven spacing (longest edge %.3g times the median): resampled from %d "
