@@ -208,8 +208,9 @@ def _browser_or_skip(download_dir: Path):
                     "(apt-get install chromium chromium-driver)")
     options = webdriver.ChromeOptions()
     options.binary_location = chromium
+    # WebGL (the 3D view) without a GPU: SwiftShader, which Chromium wants asked for
     for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1400,1000",
-                "--disable-dev-shm-usage"):
+                "--disable-dev-shm-usage", "--enable-unsafe-swiftshader"):
         options.add_argument(arg)
     options.add_experimental_option("prefs", {"download.default_directory": str(download_dir),
                                               "download.prompt_for_download": False})
@@ -364,7 +365,8 @@ def test_app_in_browser(server, browser, downloads, heart_result, tmp_path):
 
 def test_report_in_browser(browser, downloads, heart_result, tmp_path):
     path = write_html(heart_result, tmp_path / "report.html", title="heart")
-    text = path.read_text().replace("http://www.w3.org/2000/svg", "")  # a name, not a fetch
+    text = path.read_text().replace("http://www.w3.org/2000/svg", "").replace(
+        "http://www.w3.org/1999/xhtml", "")  # names, not fetches
     assert "http://" not in text and "https://" not in text  # no network
     browser.get(path.as_uri())
     _wait(browser, lambda b: _ready(b) == "result", "the embedded result")

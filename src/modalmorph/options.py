@@ -267,12 +267,18 @@ class ReadOptions(_Options):
         None, "resample 2D contours to this many nodes (default: as in the file; 200 for "
         "images and SVG)", group="input", kind="int")
     threshold: float | None = _opt(
-        None, "grey images: level separating object from background (default: Otsu's)",
+        None, "grey images: level separating object from background; needed for grey "
+        "images (two-level masks need none), whose refusal proposes Otsu's",
         group="input", kind="float")
     object: str | int = _opt(
         "largest", "images: which object to take: largest, center (the one nearest the "
         "image centre) or a label number (1 = the first in reading order)",
         group="input", kind="object", choices=OBJECTS)
+
+    flip_y: bool = _opt(
+        False, "mirror the y of 2D point files (CSV, TSV, TXT, NPY, NPZ, JSON: y up) into "
+        "image coordinates (y down, as images and SVG), for inputs mixing the two; the "
+        "results are in the mirrored coordinates", group="input", kind="bool")
 
     def _check(self):
         if self.nodes is not None and not (_is_int(self.nodes) and self.nodes >= 3):

@@ -354,6 +354,7 @@ class _Handler(BaseHTTPRequestHandler):
         pts = np.asarray(shape.points)
         return {"id": sid, "name": name, "points": pts.tolist(), "dim": int(pts.shape[1]),
                 "closed": bool(shape.closed), "image": image,
+                "faces": None if shape.faces is None else shape.faces.tolist(),
                 "y_up": shape.frame is None or not shape.frame.y_down}
 
     def _post_run(self, rest, query):
