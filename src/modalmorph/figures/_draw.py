@@ -216,10 +216,10 @@ def finish_axes(ax, points: np.ndarray, view: View = View(), *, image: bool = Fa
 
     The limits are set once, explicitly: the box of ``points`` grown by :data:`MARGIN` of
     its larger side on every side (and to the whole image when drawn), then widened about
-    its centre to the axes' aspect (2D); autoscaling is off. What is drawn later, the frames of an
-    animation above all, lands where it was computed instead of rescaling the axes (the
-    GIF drew a shape up to 2.2x its size when the first frame rescaled them). Lay out
-    what takes room from the axes (a colour bar) before this.
+    its centre to the axes' aspect (2D); autoscaling is off. What is drawn later, the
+    frames of an animation above all, lands where it was computed instead of rescaling
+    the axes (the GIF drew a shape up to 2.2x its size when the first frame rescaled
+    them). Lay out what takes room from the axes (a colour bar) before this.
     """
     names = ("x", "y", "z")[: points.shape[1]]
     labels = {f"{a}label": f"{a} ({view.unit})" for a in names}
@@ -233,11 +233,12 @@ def finish_axes(ax, points: np.ndarray, view: View = View(), *, image: bool = Fa
         ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), zlim=(lo[2], hi[2]), **labels)
         ax.set_box_aspect(np.maximum(hi - lo, 1e-12))
         return
-    box = ax.get_position().transformed(ax.figure.transFigure)  # display units
+    ax.set_aspect("equal", adjustable="datalim")  # kept by a layout engine's resizing
+    # the box the aspect is applied to (an image's own aspect may have shrunk the active one)
+    box = ax.get_position(original=True).transformed(ax.figure.transFigure)
     lo, hi = fit_aspect(lo, hi, box.height / box.width)
     ax.set(xlim=(lo[0], hi[0]), ylim=(hi[1], lo[1]) if view.y_down else (lo[1], hi[1]),
            **labels)
-    ax.set_aspect("equal", adjustable="datalim")  # kept by a layout engine's resizing
 
 
 def fit_aspect(lo: np.ndarray, hi: np.ndarray, ratio: float) -> tuple:
