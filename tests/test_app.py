@@ -191,6 +191,8 @@ def test_payload_of_a_morph_is_strict_json(hearts):
     back = json.loads(text)
     assert_allclose(back["shapes"], result.shapes, rtol=0, atol=0)  # doubles round-trip
     assert back["steps"] == result.steps and len(back["energy"]) == result.steps + 1
+    # one distance: the stop test's, as result.json and the status line say
+    assert (back["distance"], back["tolerance"]) == (result.distance, result.tolerance)
 
 
 # ------------------------------------------------------------------------ in a browser

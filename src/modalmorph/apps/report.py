@@ -107,10 +107,13 @@ def result_payload(result, *, title: str | None = None, images: dict | None = No
     dict
         JSON-ready, with ``kind`` ("morph" or "track"), ``dim``, ``steps`` (T), ``shapes``
         (T+1, m, d), ``node_energy`` (T+1, m), ``energy`` (T+1,), ``mean_distance``
-        (T+1,), ``source`` and ``target`` points with ``source_closed`` and
-        ``target_closed``, ``faces`` and ``target_faces`` (triangles (f, 3) of 3D
-        surfaces, None for contours and point clouds; ``faces`` are those of every
-        drawn shape), ``pairs`` (K, 2), ``parameters``, ``converged``,
+        (T+1,: a morph's mean distance of matched pairs per step, a track's distance of
+        the tracked shape to each frame), ``distance`` and ``tolerance`` (a morph's stop
+        test, the one ``converged`` reports; None for a track), ``source`` and ``target``
+        points with ``source_closed`` and ``target_closed``, ``faces`` and
+        ``target_faces`` (triangles (f, 3) of 3D surfaces, None for contours and point
+        clouds; ``faces`` are those of every drawn shape), ``pairs`` (K, 2),
+        ``parameters``, ``converged``,
         ``stop_reason``, ``modalmorph_version`` and ``y_up`` (coordinates not from an
         image or SVG: drawn with y up); for a morph also ``loads``
         (T+1, m, d); for a track ``frames`` (the observed object of every frame).
@@ -139,14 +142,15 @@ def result_payload(result, *, title: str | None = None, images: dict | None = No
         first, last = result.frames[0], result.frames[-1]
         payload.update(
             mean_distance=_array(result.distance), frames=[_points(f) for f in result.frames],
-            names=list(result.names), pairs=[], converged=True,
-            stop_reason=f"{result.n_frames} frames of {shapes.shape[1]} nodes")
+            names=list(result.names), pairs=[], converged=True, distance=None,
+            tolerance=None, stop_reason=f"{result.n_frames} frames of {shapes.shape[1]} nodes")
     else:
         first, last = result.source, result.target
         payload.update(
             mean_distance=_array(result.mean_distance), loads=_array(result.loads),
-            pairs=result.matching.pairs.tolist(),
-            converged=bool(result.converged), stop_reason=result.message)
+            pairs=result.matching.pairs.tolist(), distance=_number(result.distance),
+            tolerance=_number(result.tolerance), converged=bool(result.converged),
+            stop_reason=result.message)
     frame = getattr(last, "frame", None)  # shapes from images (and SVG) are drawn y down
     source = _points(first)
     payload.update(y_up=frame is None or not frame.y_down,
@@ -163,6 +167,11 @@ def _faces(shape) -> list | None:
     """A surface's triangles as nested lists; None for contours and point clouds."""
     faces = getattr(shape, "faces", None)
     return None if faces is None else np.asarray(faces).tolist()
+
+
+def _number(value) -> float | None:
+    value = float(value)
+    return value if np.isfinite(value) else None
 
 
 def _json_value(obj):
