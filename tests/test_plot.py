@@ -409,3 +409,48 @@ def test_a_real_morph_result(tmp_path):
         assert im.n_frames == result.steps + 1
     assert len(list(write_vtk_series(result, tmp_path / "vtk").parent.glob("*.vtu"))) == (
         result.steps + 1)
+
+
+def fake_track(names=("frame_1", "frame_2", "frame_3")):
+    """A tracked sequence of three frames (a circle growing into an ellipse)."""
+    morph = circle_to_ellipse(steps=len(names) - 1)
+    frames = [SimpleNamespace(points=p, closed=True, faces=None, ordered=True, dim=2)
+              for p in morph.shapes]
+    strain = np.linspace(0.0, -0.2, len(names))  # its minimum at the end
+    return SimpleNamespace(
+        points=morph.shapes, node_energy=morph.node_energy, frames=frames,
+        names=tuple(names), n_frames=len(names), strain=strain,
+        segment_strain=np.c_[strain, 0.5 * strain], cumulative_energy=np.arange(3.0),
+        shape=lambda f: frames[f])
+
+
+def test_track_figures_name_the_frames_and_the_legend_hides_no_curve():
+    from modalmorph.figures import plot_track_curves, plot_trajectories
+
+    track = fake_track()
+    ax = plot_trajectories(track)
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["frame_1", "frame_3"]
+    ax.figure.canvas.draw()
+    bar = ax.figure.axes[-1]
+    assert [t.get_text() for t in bar.get_yticklabels()] == list(track.names)
+    ax = plot_track_curves(track)
+    ax.figure.canvas.draw()
+    assert [t.get_text() for t in ax.get_xticklabels()] == list(track.names)
+    legend = ax.get_legend().get_window_extent()
+    assert legend.y0 >= ax.get_window_extent().y1 - 1  # above the axes, over no data
+    ax = plot_shapes(SimpleNamespace(**vars(circle_to_ellipse(steps=2)), names=track.names))
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert labels[0] == "frame_1 (first frame)" and labels[-1] == "frame_3 (observed)"
+
+
+def test_track_animation_frames_are_titled_by_their_names(tmp_path):
+    from modalmorph.figures.animation import _Scene
+
+    morph = SimpleNamespace(**vars(circle_to_ellipse(steps=2)), names=("a", "b", "c"))
+    scene = _Scene(morph, "energy", background=False, dpi=30)
+    assert [scene.caption(j) for j in range(3)] == [
+        "a (frame 1 of 3)", "b (frame 2 of 3)", "c (frame 3 of 3)"]
+    morph.options = SimpleNamespace(dt=0.1)
+    del morph.names
+    scene = _Scene(morph, "energy", background=False, dpi=30)
+    assert scene.caption(2) == "step 2 / 2, t = 0.2 / $\\omega_{ref}$"
