@@ -42,8 +42,8 @@ _LAYOUTS = {
 MARGIN = 0.04  # around what is drawn, on every side: a fraction of its larger side (as 3D had)
 IMAGE_ALPHA = 0.25  # black shows as 75 % grey; 0.4 hid the horse's light early steps
 ENERGY_COLORS = ("#3b4cc0", "0.6", "#b40426")  # coolwarm's ends; its 87 % grey hid e_i ~ 0
-# Percentiles of the local energy spanned by its colours: on a glyph's morph the largest
-# |e_i| was many times the 98th percentile, and a scale to it drew most nodes grey.
+# Percentiles of the local energy spanned by its colours (issue 21): on a CSV glyph, SVG,
+# horse mask and OFF egg the largest |e_i| was 1.1-5.9x this range; scaled to it, most grey.
 ENERGY_RANGE = (2.0, 98.0)
 NO_DEFORMATION = 1e-12  # |e_i| below this (k_ref L^2) is round-off: a translation gave 2e-14
 
