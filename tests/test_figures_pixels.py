@@ -228,7 +228,8 @@ def test_every_gif_frame_draws_its_step_where_it_was_computed(run):
 
 def test_gif_frames_are_titled_and_the_titles_change(run):
     frames = _frames(run["out"] / "morph.gif")
-    left, top, right, _ = _axes_box(frames[0]) if run["kind"] != "mesh" else (0, 60, 250, 0)
+    h, w = frames[0].shape[:2]  # 3D: no frame; the title lies in the top left quarter
+    left, top, right, _ = _axes_box(frames[0]) if run["kind"] != "mesh" else (0, h / 4, w, 0)
     band = (slice(0, int(top) - 2), slice(0, int(left + 0.4 * (right - left))))
     ink = [(f[band].max(axis=2) < 100).sum() for f in frames]
     assert min(ink) > 20  # text above the axes, on the left
