@@ -145,10 +145,10 @@ def _inside(shape, box):
 
 def _plot_area(mask):
     """A 3D figure's mask without the legend above (its green handle) and the colour bar
-    on the right (green too): rows below the top 20 %, columns left of 72 %."""
+    on the right (green too): rows below the top 25 %, columns left of 72 %."""
     h, w = mask.shape
     out = np.zeros_like(mask)
-    out[int(0.2 * h):, : int(0.72 * w)] = mask[int(0.2 * h):, : int(0.72 * w)]
+    out[int(0.25 * h):, : int(0.72 * w)] = mask[int(0.25 * h):, : int(0.72 * w)]
     return out
 
 
