@@ -538,7 +538,7 @@ def _progress(total: int | None, *, quiet: bool, what: str = "morphing", unit: s
         def update(step, distance):
             done[0] = step
             bar.update(task, completed=step, description=f"{what}: {unit} {step}" + (
-                "" if distance is None else f", mean distance {distance:.3g}"))
+                "" if distance is None else f", mean distance of matched pairs {distance:.3g}"))
 
         yield update
         bar.update(task, total=max(done[0], 1), completed=max(done[0], 1))
