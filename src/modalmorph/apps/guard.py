@@ -41,8 +41,12 @@ def allowed_host(host: str, address: tuple) -> bool:
 
 
 def check_request(request: Request, address: tuple, token: str) -> None:
-    """:class:`Refused` (403) for a foreign Host, a foreign Origin, a cross-site fetch, or a
+    """:class:`Refused`: 400 for a request with both a length and a transfer coding; 403
+    for a foreign Host, a foreign Origin, a cross-site fetch, or a
     state-changing request without the session's token."""
+    if "content-length" in request.headers and "transfer-encoding" in request.headers:
+        raise Refused(HTTPStatus.BAD_REQUEST, "both Content-Length and Transfer-Encoding: "
+                      "refused (the two could be read differently on the way)")
     host = request.headers.get("host", "")
     if not allowed_host(host, address):
         raise Refused(HTTPStatus.FORBIDDEN, "unexpected Host header")

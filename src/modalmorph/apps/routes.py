@@ -83,11 +83,13 @@ def _json(obj, status=HTTPStatus.OK) -> Response:
 
 def _refusal(request: Request, status, message: str, field=None) -> Response:
     """The JSON answer of a refusal. A body left unread is discarded by the server as it
-    arrives (never read as a request); one announced over 8 uploads is not waited for."""
+    arrives (never read as a request); one announced over 8 uploads, or chunked, is not
+    waited for."""
     response = _json({"error": message, "field": field}, status)
     length = request.headers.get("content-length", "")
     limit = request.app.state.session.limits.files.max_file_bytes
-    if length.isdigit() and int(length) > 8 * limit:
+    if (length.isdigit() and int(length) > 8 * limit) \
+            or "transfer-encoding" in request.headers:
         response.headers["Connection"] = "close"
     return response
 
