@@ -417,3 +417,14 @@ def test_payload_says_which_way_y_points(heart_result):
     bare = morph(np.asarray(heart_result.source.points), np.asarray(heart_result.target.points),
                  max_steps=1)
     assert result_payload(bare)["y_up"] is True
+
+
+def test_report_with_hostile_names_renders(browser, heart_result, tmp_path):
+    """A file named ``<!--<script>.csv`` blanked the report: the inlined JSON is escaped."""
+    title = "<!--<script>.csv → <img src=x onerror=window.mmOwned=1>&amp;</script>.csv"
+    path = write_html(heart_result, tmp_path / "hostile.html", title=title)
+    browser.get(path.as_uri())
+    _wait(browser, lambda b: _ready(b) == "result", "the report despite the names")
+    assert browser.find_element("id", "title").text == title  # shown as text
+    assert browser.execute_script("return window.mmOwned") is None  # nothing ran
+    assert _to_last_step(browser) == heart_result.steps

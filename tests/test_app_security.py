@@ -410,3 +410,14 @@ def test_signals_stop_the_app_and_remove_its_folder(tmp_path, sig):
                 proc.kill()
                 proc.wait(WAIT)
     assert not [p for p in tmp_path.iterdir() if p.name.startswith("modalmorph-app-")]
+
+
+def test_without_the_extra_the_app_says_what_to_install(monkeypatch, capsys):
+    from modalmorph.apps.app import MISSING_EXTRA
+    from modalmorph.apps.cli import main
+
+    monkeypatch.setitem(sys.modules, "starlette", None)  # as if not installed
+    for name in ("server", "routes", "guard"):
+        monkeypatch.delitem(sys.modules, f"modalmorph.apps.{name}", raising=False)
+    assert main(["app", "--port", "0"]) == 2
+    assert capsys.readouterr().err.strip() == f"modalmorph: error: {MISSING_EXTRA}"
