@@ -41,7 +41,10 @@ class AppLimits:
         Runs computed at once (the machine's cores go to BLAS) and runs waiting; beyond
         them a run is refused (429).
     keep : int
-        Shapes and runs kept, the oldest forgotten (a forgotten run is cancelled).
+        Runs kept, the oldest forgotten (a forgotten run is cancelled).
+    keep_shapes : int
+        Shapes kept, the oldest forgotten (two per user: 50 users at once; a shape is at
+        most 5000 nodes, 80 KB, plus the PNG of an uploaded image).
     job_ttl : float
         Seconds a finished run and its files are kept.
     header_timeout, body_timeout : float
@@ -62,6 +65,7 @@ class AppLimits:
     max_running: int = 2
     max_queued: int = 8
     keep: int = 16
+    keep_shapes: int = 128
     job_ttl: float = 1800.0
     header_timeout: float = 10.0
     body_timeout: float = 60.0

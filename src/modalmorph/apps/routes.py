@@ -68,7 +68,7 @@ class AppState:
         sid = uuid.uuid4().hex
         with self.lock:
             self.shapes[sid] = dict(shape=shape, name=name, image=image)
-            while len(self.shapes) > self.limits.keep:
+            while len(self.shapes) > self.limits.keep_shapes:
                 self.shapes.pop(next(iter(self.shapes)))
         pts = np.asarray(shape.points)
         return {"id": sid, "name": name, "points": pts.tolist(), "dim": int(pts.shape[1]),
