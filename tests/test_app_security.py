@@ -416,7 +416,9 @@ def test_without_the_extra_the_app_says_what_to_install(monkeypatch, capsys):
     from modalmorph.apps.app import MISSING_EXTRA
     from modalmorph.apps.cli import main
 
-    monkeypatch.setitem(sys.modules, "starlette", None)  # as if not installed
+    for name in [m for m in sys.modules if m.split(".")[0] in ("starlette", "uvicorn")]:
+        monkeypatch.setitem(sys.modules, name, None)  # as if not installed
+    monkeypatch.setitem(sys.modules, "starlette", None)
     for name in ("server", "routes", "guard"):
         monkeypatch.delitem(sys.modules, f"modalmorph.apps.{name}", raising=False)
     assert main(["app", "--port", "0"]) == 2
