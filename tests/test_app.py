@@ -79,9 +79,12 @@ def server():
 
 
 def _request(server, method, path, body=b"", headers=None):
+    """One request; a POST carries the session's token, as the app's page sends it."""
     conn = http.client.HTTPConnection(*server.server_address, timeout=30)
+    headers = {**({"X-Modalmorph-Token": server.token} if method == "POST" else {}),
+               **(headers or {})}
     try:
-        conn.request(method, path, body=body, headers=headers or {})
+        conn.request(method, path, body=body, headers=headers)
         response = conn.getresponse()
         return response.status, json.loads(response.read() or b"null")
     finally:
@@ -148,8 +151,8 @@ def test_upload_run_stop_and_download_over_http(server):
     assert status == 400 and answer["field"] == "k"  # refused before any run
     assert answer["error"].startswith("options: k must be a number in [1e-06, 1e+06]")
 
-    # Stop: a run that would take 10^5 steps ends at the next step
-    job = _run(server, *ids, {"k": "0.01", "dt": "0.001", "max_steps": "100000",
+    # Stop: a run that would take 5000 steps ends at the next step
+    job = _run(server, *ids, {"k": "0.01", "dt": "0.001", "max_steps": "5000",
                               "equilibrium_tol": "0"})
     for _ in range(600):
         if _request(server, "GET", f"/api/job/{job}")[1]["step"] > 0:
@@ -418,3 +421,14 @@ def test_payload_says_which_way_y_points(heart_result):
     bare = morph(np.asarray(heart_result.source.points), np.asarray(heart_result.target.points),
                  max_steps=1)
     assert result_payload(bare)["y_up"] is True
+
+
+def test_report_with_hostile_names_renders(browser, heart_result, tmp_path):
+    """A file named ``<!--<script>.csv`` blanked the report: the inlined JSON is escaped."""
+    title = "<!--<script>.csv → <img src=x onerror=window.mmOwned=1>&amp;</script>.csv"
+    path = write_html(heart_result, tmp_path / "hostile.html", title=title)
+    browser.get(path.as_uri())
+    _wait(browser, lambda b: _ready(b) == "result", "the report despite the names")
+    assert browser.find_element("id", "title").text == title  # shown as text
+    assert browser.execute_script("return window.mmOwned") is None  # nothing ran
+    assert _to_last_step(browser) == heart_result.steps

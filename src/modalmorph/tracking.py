@@ -163,12 +163,15 @@ def track(frames, *, options: TrackOptions | None = None,
     Raises
     ------
     ValueError
-        Invalid options, or a frame that cannot be tracked (the message names it).
+        Invalid options (an :class:`~modalmorph.errors.OptionError` naming ``segments``
+        when frame 0 has too few edges for them: a segment without an edge has no
+        strain), or a frame that cannot be tracked (the message names it).
     """
     opts = _track_options(options, overrides)
     match_opts = _match_options(match_options, opts.correspondence)
     morph_opts = _as_options(morph_options, MorphOptions, "morph_options")
     shapes, names = _frames(frames, names, opts.start_node)
+    _check_segments(shapes[0], names[0], opts)
     step = partial(_morph_frame, names=names, match_options=match_opts,
                    morph_options=morph_opts)
     first = shapes[0]
@@ -333,6 +336,26 @@ def _edges(shape: Shape) -> np.ndarray:
         return np.zeros((0, 2), dtype=np.intp)
     i = np.arange(m if shape.closed else m - 1)
     return np.c_[i, (i + 1) % m]
+
+
+def _check_segments(first: Shape, name: str, opts: TrackOptions) -> None:
+    """An :class:`OptionError` naming ``segments`` when a segment of frame 0 would hold
+    no edge (its strain would be 0/0), before any morph is computed."""
+    if not first.ordered or first.faces is not None:
+        return  # no segments: the strain table is empty
+    edges = _edges(first)
+
+    def fits(n: int) -> bool:
+        seg = _segment_of_edge(first, edges, n, opts.start_node)
+        return len(np.unique(seg)) == n
+
+    if fits(opts.segments):
+        return
+    most = next(n for n in range(min(opts.segments, len(edges)), 0, -1) if fits(n))
+    raise OptionError(f"segments: frame 0 ({name}) has {len(edges)} edges, too few for "
+                      f"{opts.segments} segments of equal arc length (a segment would hold "
+                      f"no edge and its strain would be undefined): pass segments={most} or "
+                      f"fewer, or resample the frames to more nodes")
 
 
 def _segment_of_edge(shape: Shape, edges: np.ndarray, segments: int,

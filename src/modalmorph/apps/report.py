@@ -188,8 +188,11 @@ def render_page(payload: dict | None) -> str:
         _THREE_SLOT, f"<script id=\"three-js\">\n{three}</script>", 1)
     if payload is None:
         return page
-    # "</" would end the script element early; "<\/" is the same JSON string
-    text = json.dumps(payload, allow_nan=False, separators=(",", ":")).replace("</", "<\\/")
+    # "</script" would end the element and "<!--" would start a comment that swallows
+    # it (a file named "<!--<script>.csv" blanked the page): no "<", ">" or "&" is left,
+    # each written as the same JSON string's \\u escape
+    text = json.dumps(payload, allow_nan=False, separators=(",", ":"))
+    text = text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")
     return page.replace(_DATA_SLOT, _DATA_SLOT.replace("null", text), 1)
 
 

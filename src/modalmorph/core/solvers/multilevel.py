@@ -102,6 +102,10 @@ _FIELD_CHUNK = 16384
 THREADS = 2
 
 
+# Fewest nodes of a model (a shape has at least 3): the coarse model's floor.
+_MIN_COARSE = 3
+
+
 def _guard(n: int) -> int:
     """Extra vectors in the block beyond the ``n`` wanted: the block's convergence rate is
     set by the gap between mode ``n`` and mode ``n + guard + 1``."""
@@ -175,6 +179,11 @@ def _coarse_start(model, n: int, coarse_nodes: int, order: np.ndarray,
     """The starting block (d*m, kc): the lowest ``kc`` modes (``n`` and the guard) of a
     model of the same object on at most ``coarse_nodes`` nodes, as displacement fields at
     the fine nodes (in the solver's node order)."""
+    if model.m // 2 < _MIN_COARSE:
+        raise ModelError(f"solver='multilevel' needs at least {2 * _MIN_COARSE} nodes (its "
+                         f"coarse model has half of them, and a model at least "
+                         f"{_MIN_COARSE}), this shape has {model.m}: use solver='dense' or "
+                         f"'sparse'")
     cmodel = model.coarsened(min(coarse_nodes, model.m // 2))
     k = min(n + _guard(n), model.dim * model.m // 2)
     kc = min(k, cmodel.dim * cmodel.m - 2)
