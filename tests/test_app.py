@@ -79,9 +79,12 @@ def server():
 
 
 def _request(server, method, path, body=b"", headers=None):
+    """One request; a POST carries the session's token, as the app's page sends it."""
     conn = http.client.HTTPConnection(*server.server_address, timeout=30)
+    headers = {**({"X-Modalmorph-Token": server.token} if method == "POST" else {}),
+               **(headers or {})}
     try:
-        conn.request(method, path, body=body, headers=headers or {})
+        conn.request(method, path, body=body, headers=headers)
         response = conn.getresponse()
         return response.status, json.loads(response.read() or b"null")
     finally:
@@ -148,8 +151,8 @@ def test_upload_run_stop_and_download_over_http(server):
     assert status == 400 and answer["field"] == "k"  # refused before any run
     assert answer["error"].startswith("options: k must be a number in [1e-06, 1e+06]")
 
-    # Stop: a run that would take 10^5 steps ends at the next step
-    job = _run(server, *ids, {"k": "0.01", "dt": "0.001", "max_steps": "100000",
+    # Stop: a run that would take 5000 steps ends at the next step
+    job = _run(server, *ids, {"k": "0.01", "dt": "0.001", "max_steps": "5000",
                               "equilibrium_tol": "0"})
     for _ in range(600):
         if _request(server, "GET", f"/api/job/{job}")[1]["step"] > 0:
@@ -191,6 +194,8 @@ def test_payload_of_a_morph_is_strict_json(hearts):
     back = json.loads(text)
     assert_allclose(back["shapes"], result.shapes, rtol=0, atol=0)  # doubles round-trip
     assert back["steps"] == result.steps and len(back["energy"]) == result.steps + 1
+    # one distance: the stop test's, as result.json and the status line say
+    assert (back["distance"], back["tolerance"]) == (result.distance, result.tolerance)
 
 
 # ------------------------------------------------------------------------ in a browser
@@ -208,8 +213,9 @@ def _browser_or_skip(download_dir: Path):
                     "(apt-get install chromium chromium-driver)")
     options = webdriver.ChromeOptions()
     options.binary_location = chromium
+    # WebGL (the 3D view) without a GPU: SwiftShader, which Chromium wants asked for
     for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1400,1000",
-                "--disable-dev-shm-usage"):
+                "--disable-dev-shm-usage", "--enable-unsafe-swiftshader"):
         options.add_argument(arg)
     options.add_experimental_option("prefs", {"download.default_directory": str(download_dir),
                                               "download.prompt_for_download": False})
@@ -364,7 +370,8 @@ def test_app_in_browser(server, browser, downloads, heart_result, tmp_path):
 
 def test_report_in_browser(browser, downloads, heart_result, tmp_path):
     path = write_html(heart_result, tmp_path / "report.html", title="heart")
-    text = path.read_text().replace("http://www.w3.org/2000/svg", "")  # a name, not a fetch
+    text = path.read_text().replace("http://www.w3.org/2000/svg", "").replace(
+        "http://www.w3.org/1999/xhtml", "")  # names, not fetches
     assert "http://" not in text and "https://" not in text  # no network
     browser.get(path.as_uri())
     _wait(browser, lambda b: _ready(b) == "result", "the embedded result")
@@ -414,3 +421,14 @@ def test_payload_says_which_way_y_points(heart_result):
     bare = morph(np.asarray(heart_result.source.points), np.asarray(heart_result.target.points),
                  max_steps=1)
     assert result_payload(bare)["y_up"] is True
+
+
+def test_report_with_hostile_names_renders(browser, heart_result, tmp_path):
+    """A file named ``<!--<script>.csv`` blanked the report: the inlined JSON is escaped."""
+    title = "<!--<script>.csv → <img src=x onerror=window.mmOwned=1>&amp;</script>.csv"
+    path = write_html(heart_result, tmp_path / "hostile.html", title=title)
+    browser.get(path.as_uri())
+    _wait(browser, lambda b: _ready(b) == "result", "the report despite the names")
+    assert browser.find_element("id", "title").text == title  # shown as text
+    assert browser.execute_script("return window.mmOwned") is None  # nothing ran
+    assert _to_last_step(browser) == heart_result.steps

@@ -84,7 +84,14 @@ def _check_batch(data, out):
     for name, kind in (("heart", "pair"), ("hands", "pair"), ("seq", "sequence")):
         _same_outputs(out / name, data / "ref" / name, kind)
         assert rows[name]["converged"] == "True" and int(rows[name]["steps"]) > 0
+    for name in ("heart", "hands"):  # one distance: the stop test's, as result.json says
+        record = json.loads((out / name / "result.json").read_text())
+        assert float(rows[name]["distance"]) == record["distance"]
+        assert float(rows[name]["tolerance"]) == record["tolerance"]
+        assert float(rows[name]["distance"]) <= float(rows[name]["tolerance"])  # converged
+        assert rows[name]["frame_distance"] == ""
     seq = rows["seq"]
+    assert seq["distance"] == "" and float(seq["frame_distance"]) >= 0
     assert float(seq["strain_min"]) <= 0 <= float(seq["strain_max"])  # frame 0: strain 0
     assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no staging left
 

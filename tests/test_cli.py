@@ -235,7 +235,8 @@ def test_warnings_one_line_each_after_success_none_after_error(tmp_path, hand_cs
     assert _run("morph", svg, hand_csvs[1], "--out", out, "--nodes", "70", "-q",
                 "--tol", "0.5", "--no-figures", "--no-gif") == 0
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("modalmorph: warning: ") and "two.svg" in err[0]
+    assert len(err) == 2 and all(e.startswith("modalmorph: warning: ") for e in err)
+    assert "two.svg" in err[0] and "y pointing up" in err[1]  # an SVG and a CSV: mirrored?
     c3 = _csv(tmp_path / "c3.csv", np.random.default_rng(1).standard_normal((30, 3)))
     assert _run("morph", svg, c3, "--out", tmp_path / "o2") == 2  # warns, then fails
     err = capsys.readouterr().err.strip().splitlines()

@@ -140,16 +140,42 @@ def test_plot_shapes_has_a_labelled_colour_bar(morph, color_by, label):
     assert legend[0].startswith("source") and legend[-1] == "target"
 
 
-def test_plot_shapes_energy_norm_is_centred_on_zero():
+def test_plot_shapes_energy_scale_is_signed_robust_and_centred_on_zero():
     morph = circle_to_ellipse()  # its local energy has both signs
     ax = plot_shapes(morph, color_by="energy")
     lines = ax.collections[0]
-    assert lines.norm.vmin == pytest.approx(-lines.norm.vmax)  # zero in the middle
-    assert lines.norm.vmax == pytest.approx(np.abs(morph.node_energy).max())
-    bar = ax.figure.axes[-1]  # spans the values, not a symmetric range they do not fill
     e = morph.node_energy
-    assert bar.get_ylim() == pytest.approx((e.min(), e.max()))
-    assert e.min() > -0.5 * e.max()  # (so the check above is not the symmetric range)
+    lo, hi = np.percentile(e, [2, 98])  # the scale spans these, symmetric about zero
+    assert lines.norm.vmin == pytest.approx(-lines.norm.vmax)  # zero in the middle
+    assert lines.norm.vmax == pytest.approx(max(-lo, hi))
+    assert lines.norm.vmax < np.abs(e).max()  # (so the largest values are clipped ...)
+    bar = ax.figure.axes[-1]
+    assert "signed" in bar.get_ylabel()
+    colorbar = bar._colorbar  # ... and the bar says so with an arrow
+    assert colorbar.extend == "max"
+
+
+def test_a_few_strained_nodes_do_not_set_the_energy_colours():
+    morph = circle_to_ellipse()
+    e = np.abs(morph.node_energy)
+    e[-1, 3] = 1e3 * e.max()  # one node far above the rest
+    morph.node_energy = e
+    ax = plot_shapes(morph, color_by="energy")
+    norm = ax.collections[0].norm
+    assert norm.vmin == 0.0 and norm.vmax < 2 * np.percentile(e, 98)  # grey to red from 0
+    assert ax.figure.axes[-1]._colorbar.extend == "max"
+
+
+def test_a_rigid_motion_is_drawn_as_no_deformation():
+    morph = circle_to_ellipse()
+    morph.node_energy = 2e-14 * np.sin(np.arange(morph.node_energy.size)).reshape(
+        morph.node_energy.shape)  # round-off of a pure translation (measured +-2e-14)
+    ax = plot_shapes(morph, color_by="energy")
+    bar = ax.figure.axes[-1]
+    assert bar.get_ylabel().startswith("no deformation")
+    colours = ax.collections[0].to_rgba(morph.node_energy.ravel())
+    assert np.ptp(colours, axis=0).max() == 0  # one colour for every node
+    assert [t.get_text() for t in bar.get_yticklabels()] == ["0"]
 
 
 def test_plot_shapes_loads_start_at_zero_with_units():
@@ -201,13 +227,30 @@ def test_plot_energy(morph):
     assert isinstance(ax, Axes)
     assert ax.get_xlabel() == "step"
     twin = [a for a in ax.figure.axes if a is not ax]
-    assert len(twin) == 1 and "mean distance" in twin[0].get_ylabel()
-    assert twin[0].get_ylabel().endswith("(input units)")
+    assert len(twin) == 1 and twin[0].get_ylabel() == "distance (input units)"
     assert ax.get_ylabel().endswith("($k_{ref} L^2$)")
     ticks = ax.get_xticks()
     assert np.allclose(ticks, np.round(ticks))  # integer steps
     legend = [t.get_text() for t in ax.get_legend().get_texts()]
-    assert len(legend) == 2
+    assert legend == ["global strain energy $E$ (22)", "mean distance of matched pairs"]
+
+
+def test_plot_energy_draws_the_stop_distance_and_its_tolerance():
+    """The stop test's distance (what converged compares) is drawn, named apart from the
+    matched pairs' mean distance, with the tolerance as a line."""
+    morph = circle_to_ellipse()
+    morph.distance, morph.tolerance = 0.0123, 0.05
+    ax = plot_energy(morph)
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert legend[1:] == ["mean distance of matched pairs", "tolerance 0.05",
+                          "distance (stop test): 0.0123"]
+    twin = ax.figure.axes[-1]
+    star = [line for line in twin.get_lines() if line.get_marker() == "*"][0]
+    assert_allclose(star.get_xydata(), [[T, 0.0123]])
+    tol = [line for line in twin.get_lines() if line.get_linestyle() == ":"][0]
+    assert_allclose(tol.get_ydata(), [0.05, 0.05])
+    title = ax.get_legend().get_title().get_text()
+    assert "\n" not in morph.message and title == morph.message  # one clause a line
 
 
 @pytest.mark.parametrize(("kind", "formats"), [
@@ -366,3 +409,48 @@ def test_a_real_morph_result(tmp_path):
         assert im.n_frames == result.steps + 1
     assert len(list(write_vtk_series(result, tmp_path / "vtk").parent.glob("*.vtu"))) == (
         result.steps + 1)
+
+
+def fake_track(names=("frame_1", "frame_2", "frame_3")):
+    """A tracked sequence of three frames (a circle growing into an ellipse)."""
+    morph = circle_to_ellipse(steps=len(names) - 1)
+    frames = [SimpleNamespace(points=p, closed=True, faces=None, ordered=True, dim=2)
+              for p in morph.shapes]
+    strain = np.linspace(0.0, -0.2, len(names))  # its minimum at the end
+    return SimpleNamespace(
+        points=morph.shapes, node_energy=morph.node_energy, frames=frames,
+        names=tuple(names), n_frames=len(names), strain=strain,
+        segment_strain=np.c_[strain, 0.5 * strain], cumulative_energy=np.arange(3.0),
+        shape=lambda f: frames[f])
+
+
+def test_track_figures_name_the_frames_and_the_legend_hides_no_curve():
+    from modalmorph.figures import plot_track_curves, plot_trajectories
+
+    track = fake_track()
+    ax = plot_trajectories(track)
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["frame_1", "frame_3"]
+    ax.figure.canvas.draw()
+    bar = ax.figure.axes[-1]
+    assert [t.get_text() for t in bar.get_yticklabels()] == list(track.names)
+    ax = plot_track_curves(track)
+    ax.figure.canvas.draw()
+    assert [t.get_text() for t in ax.get_xticklabels()] == list(track.names)
+    legend = ax.get_legend().get_window_extent()
+    assert legend.y0 >= ax.get_window_extent().y1 - 1  # above the axes, over no data
+    ax = plot_shapes(SimpleNamespace(**vars(circle_to_ellipse(steps=2)), names=track.names))
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert labels[0] == "frame_1 (first frame)" and labels[-1] == "frame_3 (observed)"
+
+
+def test_track_animation_frames_are_titled_by_their_names(tmp_path):
+    from modalmorph.figures.animation import _Scene
+
+    morph = SimpleNamespace(**vars(circle_to_ellipse(steps=2)), names=("a", "b", "c"))
+    scene = _Scene(morph, "energy", background=False, dpi=30)
+    assert [scene.caption(j) for j in range(3)] == [
+        "a (frame 1 of 3)", "b (frame 2 of 3)", "c (frame 3 of 3)"]
+    morph.options = SimpleNamespace(dt=0.1)
+    del morph.names
+    scene = _Scene(morph, "energy", background=False, dpi=30)
+    assert scene.caption(2) == "step 2 / 2, t = 0.2 / $\\omega_{ref}$"

@@ -49,10 +49,7 @@ FRAME_SPACINGS = ("time", "path")
 STEP_MESHES = ("none", "ply", "obj")  # OutputOptions.meshes
 REFERENCES = ("previous", "first")
 CORRESPONDENCES = ("nearest", "modal")
-# Option ranges beyond which the integration is meaningless or overflows (the fuzz suite
-# found dt = 1e-300 dividing by zero in Newmark's coefficients and c_x = 1e300 overflowing):
-# k and dt over 12 decades about their defaults; c_x, c_v are fractions of the way (17),
-# (18), where 1 already starts at the target.
+# Ranges beyond which the integration is meaningless or overflows (fuzz suite; method.md §4).
 K_RANGE = (1e-6, 1e6)
 DT_RANGE = (1e-6, 1e6)
 C_MAX = 10.0
@@ -271,12 +268,18 @@ class ReadOptions(_Options):
         None, "resample 2D contours to this many nodes (default: as in the file; 200 for "
         "images and SVG)", group="input", kind="int")
     threshold: float | None = _opt(
-        None, "grey images: level separating object from background (default: Otsu's)",
+        None, "grey images: level separating object from background; needed for grey "
+        "images (two-level masks need none), whose refusal proposes Otsu's",
         group="input", kind="float")
     object: str | int = _opt(
         "largest", "images: which object to take: largest, center (the one nearest the "
         "image centre) or a label number (1 = the first in reading order)",
         group="input", kind="object", choices=OBJECTS)
+
+    flip_y: bool = _opt(
+        False, "mirror the y of 2D point files (CSV, TSV, TXT, NPY, NPZ, JSON: y up) into "
+        "image coordinates (y down, as images and SVG), for inputs mixing the two; the "
+        "results are in the mirrored coordinates", group="input", kind="bool")
 
     def _check(self):
         if self.nodes is not None and not (_is_int(self.nodes) and self.nodes >= 3):

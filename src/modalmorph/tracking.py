@@ -163,12 +163,15 @@ def track(frames, *, options: TrackOptions | None = None,
     Raises
     ------
     ValueError
-        Invalid options, or a frame that cannot be tracked (the message names it).
+        Invalid options (an :class:`~modalmorph.errors.OptionError` naming ``segments``
+        when frame 0 has too few edges for them: a segment without an edge has no
+        strain), or a frame that cannot be tracked (the message names it).
     """
     opts = _track_options(options, overrides)
     match_opts = _match_options(match_options, opts.correspondence)
-    morph_opts = _morph_options(morph_options)
+    morph_opts = _as_options(morph_options, MorphOptions, "morph_options")
     shapes, names = _frames(frames, names, opts.start_node)
+    _check_segments(shapes[0], names[0], opts)
     step = partial(_morph_frame, names=names, match_options=match_opts,
                    morph_options=morph_opts)
     first = shapes[0]
@@ -222,30 +225,22 @@ def _match_options(value, correspondence: str) -> MatchOptions | None:
         return MatchOptions() if correspondence == "modal" else None
     if correspondence != "modal":
         raise OptionError("match_options apply to correspondence='modal' only")
-    if isinstance(value, MatchOptions):
-        return value
-    if not isinstance(value, dict):
-        raise OptionError(f"match_options must be a MatchOptions or a dict, "
-                          f"got {type(value).__name__}")
-    try:
-        return MatchOptions().replace(**value)
-    except OptionError as exc:
-        raise OptionError(f"match_options: {exc}") from None
+    return _as_options(value, MatchOptions, "match_options")
 
 
-def _morph_options(value) -> MorphOptions:
-    """The morph's options, from a MorphOptions or a dict of its fields."""
+def _as_options(value, cls, name: str):
+    """An option object of class ``cls`` from one, a dict of its fields, or None."""
     if value is None:
-        return MorphOptions()
-    if isinstance(value, MorphOptions):
+        return cls()
+    if isinstance(value, cls):
         return value
     if not isinstance(value, dict):
-        raise OptionError(f"morph_options must be a MorphOptions or a dict, "
+        raise OptionError(f"{name} must be a {cls.__name__} or a dict, "
                           f"got {type(value).__name__}")
     try:
-        return MorphOptions().replace(**value)
+        return cls().replace(**value)
     except OptionError as exc:
-        raise OptionError(f"morph_options: {exc}") from None
+        raise OptionError(f"{name}: {exc}") from None
 
 
 def _frames(frames, names, start_node) -> tuple[list, tuple]:
@@ -341,6 +336,26 @@ def _edges(shape: Shape) -> np.ndarray:
         return np.zeros((0, 2), dtype=np.intp)
     i = np.arange(m if shape.closed else m - 1)
     return np.c_[i, (i + 1) % m]
+
+
+def _check_segments(first: Shape, name: str, opts: TrackOptions) -> None:
+    """An :class:`OptionError` naming ``segments`` when a segment of frame 0 would hold
+    no edge (its strain would be 0/0), before any morph is computed."""
+    if not first.ordered or first.faces is not None:
+        return  # no segments: the strain table is empty
+    edges = _edges(first)
+
+    def fits(n: int) -> bool:
+        seg = _segment_of_edge(first, edges, n, opts.start_node)
+        return len(np.unique(seg)) == n
+
+    if fits(opts.segments):
+        return
+    most = next(n for n in range(min(opts.segments, len(edges)), 0, -1) if fits(n))
+    raise OptionError(f"segments: frame 0 ({name}) has {len(edges)} edges, too few for "
+                      f"{opts.segments} segments of equal arc length (a segment would hold "
+                      f"no edge and its strain would be undefined): pass segments={most} or "
+                      f"fewer, or resample the frames to more nodes")
 
 
 def _segment_of_edge(shape: Shape, edges: np.ndarray, segments: int,

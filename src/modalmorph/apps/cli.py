@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+import re
 import sys
 import time
 import warnings
@@ -41,8 +42,8 @@ from .runs import (
     write_morph,
 )
 
-__all__ = ["main", "build_parser", "add_option_flags", "flag_help", "load_config",
-           "EXIT_CODES"]
+__all__ = ["main", "build_parser", "add_option_flags", "flag_help", "flag_text",
+           "load_config", "EXIT_CODES"]
 
 log = logging.getLogger("modalmorph")
 
@@ -74,8 +75,11 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # argparse: --help, --version (0) or a usage error (2)
         return int(exc.code or 0)
+    fresh = not logging.getLogger().handlers  # else a host (pytest) owns the handlers
     logging.basicConfig(level=logging.WARNING if args.quiet else logging.INFO,
                         format="%(message)s")
+    if fresh:  # log lines name flags, as the errors and warnings below
+        logging.getLogger().handlers[0].addFilter(_FlagFilter())
     # a morph short of its tolerance is said once, by the status line or the warning below
     logging.getLogger("modalmorph.simulation").setLevel(logging.WARNING)
     # Library warnings are collected, not printed as they come: after a successful run each
@@ -91,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
             known = isinstance(exc, ValueError | OSError | ImportError | MorphDivergedError)
             text = " ".join(str(exc).split())
             message = text if known and text else f"{type(exc).__name__}: {text}"
-            print(f"modalmorph: error: {message}", file=sys.stderr)
+            print(f"modalmorph: error: {flag_text(message)}", file=sys.stderr)
             return EXIT_USAGE
     for warning in caught:
         _warn(str(warning.message))
@@ -99,7 +103,44 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _warn(text: str) -> None:
-    print(f"modalmorph: warning: {' '.join(text.split())}", file=sys.stderr)
+    print(f"modalmorph: warning: {flag_text(' '.join(text.split()))}", file=sys.stderr)
+
+
+def _flags() -> dict:
+    """``{flat option name: (its flag, whether it is a --x/--no-x switch)}``."""
+    return {name: (f.metadata.get("flag") or "--" + name.replace("_", "-"),
+                   f.metadata["kind"] == "bool")
+            for name, _cls, f in flat_fields(SEQUENCE_CLASSES)}
+
+
+_FLAGS = _flags()
+# ``name=value`` of an option in a library message; the value ends at a space, a comma,
+# a semicolon or a closing bracket
+_KEYWORD = re.compile(r"(?<![\w.-])(" + "|".join(sorted(_FLAGS, key=len, reverse=True)) +
+                      r")=([^\s,;)\]]*)")
+
+
+def flag_text(text: str) -> str:
+    """A library message as the command line says it: ``threshold=102`` becomes
+    ``--threshold 102``, ``remove_rigid=True`` ``--remove-rigid`` (and ``False``
+    ``--no-remove-rigid``): the flags of :func:`modalmorph.options.flat_fields`."""
+    def flag(match: re.Match) -> str:
+        (name, switch), value = _FLAGS[match[1]], match[2]
+        end = "." if value.endswith(".") else ""  # the end of a sentence
+        value = value.removesuffix(".").strip("'\"")
+        if switch and value in ("True", "true", "False", "false"):
+            return (name if value.lower() == "true" else "--no-" + name[2:]) + end
+        return (f"{name} {value}" if value else name) + end
+
+    return _KEYWORD.sub(flag, text)
+
+
+class _FlagFilter(logging.Filter):
+    """Log lines of the library with flags for keywords (:func:`flag_text`)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        record.msg, record.args = flag_text(record.getMessage()), None
+        return True
 
 
 # ------------------------------------------------------------------------------ parser
@@ -471,7 +512,7 @@ def _report(result, written, seconds: float, *, quiet: bool) -> None:
     if quiet:
         return
     print(f"{result.source.m} -> {result.target.m} nodes, {len(result.matching.pairs)} "
-          f"matches; {result.message}; {seconds:.1f} s", file=sys.stderr)
+          f"matches; {flag_text(result.message)}; {seconds:.1f} s", file=sys.stderr)
     _list_files(written)
 
 
@@ -497,7 +538,7 @@ def _progress(total: int | None, *, quiet: bool, what: str = "morphing", unit: s
         def update(step, distance):
             done[0] = step
             bar.update(task, completed=step, description=f"{what}: {unit} {step}" + (
-                "" if distance is None else f", mean distance {distance:.3g}"))
+                "" if distance is None else f", mean distance of matched pairs {distance:.3g}"))
 
         yield update
         bar.update(task, total=max(done[0], 1), completed=max(done[0], 1))

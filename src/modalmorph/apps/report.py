@@ -1,11 +1,15 @@
 """The interactive viewer of a result, and the self-contained HTML report built on it.
 
-One page, ``web/viewer.html`` (vanilla JavaScript and SVG, no framework, no network), draws
-a result given as JSON (:func:`result_payload`): the intermediate shapes with a time
+One page, ``web/viewer.html`` (vanilla JavaScript, no framework, no network), draws a
+result given as JSON (:func:`result_payload`): the intermediate shapes with a time
 slider and play button, coloured plain, by load or by local strain energy with a colour
 bar, the matches, the energy and distance curves, and the load and energy of the node
-under the pointer. :func:`write_html` inlines the JSON into the page, giving one file
-that opens from disk; :mod:`modalmorph.apps.app` serves the same page with a form around it.
+under the pointer. 2D shapes are drawn in SVG; 3D shapes with three.js (WebGL): surfaces
+shaded with their faces, point clouds as points, orbit (drag), zoom (wheel) and pan
+(right drag). :func:`render_page` inlines three.js (``web/three.min.js``, see
+``web/README.md``) and :func:`write_html` the JSON into the page, giving one file that
+opens from disk with no network; :mod:`modalmorph.apps.app` serves the same page with a
+form around it.
 """
 
 from __future__ import annotations
@@ -27,6 +31,8 @@ __all__ = ["image_data", "image_size", "input_images", "render_page", "result_pa
 # The line of viewer.html that receives the result as JSON; ``null`` when the page is
 # served by the app, which fetches results instead.
 _DATA_SLOT = '<script id="mm-data" type="application/json">null</script>'
+# The line of viewer.html that receives three.js (the 3D view), inlined.
+_THREE_SLOT = '<script id="three-js"></script>'
 
 
 def _array(values) -> list:
@@ -101,8 +107,13 @@ def result_payload(result, *, title: str | None = None, images: dict | None = No
     dict
         JSON-ready, with ``kind`` ("morph" or "track"), ``dim``, ``steps`` (T), ``shapes``
         (T+1, m, d), ``node_energy`` (T+1, m), ``energy`` (T+1,), ``mean_distance``
-        (T+1,), ``source`` and ``target`` points with ``source_closed`` and
-        ``target_closed``, ``pairs`` (K, 2), ``parameters``, ``converged``,
+        (T+1,: a morph's mean distance of matched pairs per step, a track's distance of
+        the tracked shape to each frame), ``distance`` and ``tolerance`` (a morph's stop
+        test, the one ``converged`` reports; None for a track), ``source`` and ``target``
+        points with ``source_closed`` and ``target_closed``, ``faces`` and
+        ``target_faces`` (triangles (f, 3) of 3D surfaces, None for contours and point
+        clouds; ``faces`` are those of every drawn shape), ``pairs`` (K, 2),
+        ``parameters``, ``converged``,
         ``stop_reason``, ``modalmorph_version`` and ``y_up`` (coordinates not from an
         image or SVG: drawn with y up); for a morph also ``loads``
         (T+1, m, d); for a track ``frames`` (the observed object of every frame).
@@ -131,20 +142,36 @@ def result_payload(result, *, title: str | None = None, images: dict | None = No
         first, last = result.frames[0], result.frames[-1]
         payload.update(
             mean_distance=_array(result.distance), frames=[_points(f) for f in result.frames],
-            names=list(result.names), pairs=[], converged=True,
-            stop_reason=f"{result.n_frames} frames of {shapes.shape[1]} nodes")
+            names=list(result.names), pairs=[], converged=True, distance=None,
+            tolerance=None, stop_reason=f"{result.n_frames} frames of {shapes.shape[1]} nodes")
     else:
         first, last = result.source, result.target
         payload.update(
             mean_distance=_array(result.mean_distance), loads=_array(result.loads),
-            pairs=result.matching.pairs.tolist(),
-            converged=bool(result.converged), stop_reason=result.message)
+            pairs=result.matching.pairs.tolist(), distance=_number(result.distance),
+            tolerance=_number(result.tolerance), converged=bool(result.converged),
+            stop_reason=result.message)
     frame = getattr(last, "frame", None)  # shapes from images (and SVG) are drawn y down
+    source = _points(first)
     payload.update(y_up=frame is None or not frame.y_down,
-                   source=_points(first), target=_points(last),
+                   source=source, target=_points(last),
                    source_closed=bool(getattr(first, "closed", True)),
-                   target_closed=bool(getattr(last, "closed", True)))
+                   target_closed=bool(getattr(last, "closed", True)),
+                   # the drawn shapes have the nodes, so the triangles, of the first
+                   faces=_faces(first) if len(source) == shapes.shape[1] else None,
+                   target_faces=_faces(last))
     return payload
+
+
+def _faces(shape) -> list | None:
+    """A surface's triangles as nested lists; None for contours and point clouds."""
+    faces = getattr(shape, "faces", None)
+    return None if faces is None else np.asarray(faces).tolist()
+
+
+def _number(value) -> float | None:
+    value = float(value)
+    return value if np.isfinite(value) else None
 
 
 def _json_value(obj):
@@ -155,11 +182,17 @@ def _json_value(obj):
 
 def render_page(payload: dict | None) -> str:
     """The viewer page with ``payload`` inlined, or empty (``None``) for the app."""
-    page = resources.files("modalmorph").joinpath("apps", "web", "viewer.html").read_text("utf-8")
+    web = resources.files("modalmorph").joinpath("apps", "web")
+    three = web.joinpath("three.min.js").read_text("utf-8")
+    page = web.joinpath("viewer.html").read_text("utf-8").replace(
+        _THREE_SLOT, f"<script id=\"three-js\">\n{three}</script>", 1)
     if payload is None:
         return page
-    # "</" would end the script element early; "<\/" is the same JSON string
-    text = json.dumps(payload, allow_nan=False, separators=(",", ":")).replace("</", "<\\/")
+    # "</script" would end the element and "<!--" would start a comment that swallows
+    # it (a file named "<!--<script>.csv" blanked the page): no "<", ">" or "&" is left,
+    # each written as the same JSON string's \\u escape
+    text = json.dumps(payload, allow_nan=False, separators=(",", ":"))
+    text = text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")
     return page.replace(_DATA_SLOT, _DATA_SLOT.replace("null", text), 1)
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import glob
 import hashlib
 import os
+import warnings
 from dataclasses import MISSING, dataclass, field
 from pathlib import Path
 
@@ -28,6 +29,7 @@ from ..io import (
     write_gltf,
     write_step_meshes,
     write_vtk_series,
+    y_down,
 )
 from ..matching import match
 from ..options import (
@@ -46,7 +48,7 @@ from .report import input_images, write_html
 
 __all__ = ["Settings", "ItemRun", "PAIR_CLASSES",
            "SEQUENCE_CLASSES", "BATCH_CLASSES", "FORM_CLASSES",
-           "check_tools", "default_text", "file_record", "input_records",
+           "check_tools", "check_y_directions", "default_text", "file_record", "input_records",
            "read_pair", "compute_morph", "morph_files", "track_files", "write_morph"]
 
 
@@ -168,11 +170,27 @@ def read_pair(source_path, target_path, read: ReadOptions):
     if source.dim != target.dim:
         raise ShapeError(f"{source_path} is {source.dim}D but {target_path} is "
                          f"{target.dim}D: both shapes must have the same dimension")
+    check_y_directions([source_path, target_path], [source, target])
     return source, target
 
 
+def check_y_directions(names, shapes) -> None:
+    """Warn once when 2D inputs mix y up (point files) and y down (images, SVG): the same
+    outline in both conventions is its own mirror image, which a morph reaches happily."""
+    flat = [(os.fspath(n), y_down(s)) for n, s in zip(names, shapes, strict=True)
+            if s.dim == 2]
+    up = [n for n, down in flat if not down]
+    down = [n for n, down in flat if down]
+    if up and down:
+        warnings.warn(f"{up[0]} has y pointing up (a point file) but {down[0]} has y "
+                      f"pointing down (image coordinates): the same outline in the two is "
+                      f"mirrored; flip_y=True mirrors the point files' y to match",
+                      stacklevel=2)
+
+
 def _read_kwargs(read: ReadOptions) -> dict:
-    return dict(nodes=read.nodes, threshold=read.threshold, object=read.object)
+    return dict(nodes=read.nodes, threshold=read.threshold, object=read.object,
+                flip_y=read.flip_y)
 
 
 def compute_morph(source, target, settings: Settings, *, progress=None):
@@ -245,6 +263,7 @@ def track_files(inputs, out, settings: Settings | None = None, *, progress=None)
     out = Path(out)
     with atomic_output_dir(out) as tmp:
         frames = read_frames(inputs, **_read_kwargs(settings.read))
+        check_y_directions(frames.names, frames.shapes)
         with limit(max(shape.m for shape in frames.shapes)):
             result = track(frames.shapes, names=frames.names, options=seq,
                            match_options=settings.match

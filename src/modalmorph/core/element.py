@@ -32,11 +32,7 @@ __all__ = ["DEFAULT_SIGMA", "AUTO_CONDITION", "MAX_CONDITION", "MIN_SIGMA", "MAX
 
 # sigma in units of the mean nearest-neighbour spacing; chosen by measurement, see README.
 DEFAULT_SIGMA = 1.0
-# sigma=None: the largest width up to the nominal one whose Gamma has a condition number of
-# at most AUTO_CONDITION, two decades inside the refusal limit MAX_CONDITION.
-# Measured (log10 cond(Gamma) at sigma 1 / 1.5 / 2): evenly sampled circle of 160 nodes
-# 4.0 / 9.1 / 15.8, letter R 3.9 / 8.8 / 14.7, hand 3.6 / 6.5 / 9.1: a nominal 2 is fine for
-# hands and singular for circles and glyphs, so the width must follow the shape.
+# sigma=None: the widest width up to the nominal one with cond(Gamma) <= this (method.md §1).
 AUTO_CONDITION = 1e10
 # Beyond this condition number of Gamma the mass-normalisation loses more than ~4 of its
 # 16 digits (Phi^T M Phi = I is then only good to ~1e-4): refuse instead of returning noise.
@@ -49,9 +45,7 @@ MIN_SIGMA = 0.05
 MAX_SIGMA = 10.0
 # A truncated model drops every interaction smaller than this fraction of the diagonal.
 DEFAULT_CUTOFF = 1e-10
-# The largest eigenproblem solved densely without being asked, in degrees of freedom
-# (d * m): there all modes take about a second (benchmarks/model.py). auto_sigma measures
-# Gamma's condition number up to this size; solver="auto" picks the dense solver up to it.
+# Largest eigenproblem solved densely unasked, in d * m: all modes in ~1 s (method.md §7).
 AUTO_DENSE_MAX_DOF = 3000
 # auto_sigma stops within this many decades below AUTO_CONDITION, or after _AUTO_STEPS.
 _AUTO_SLACK, _AUTO_STEPS = 0.5, 8

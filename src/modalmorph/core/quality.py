@@ -19,14 +19,9 @@ __all__ = ["Polyline", "area", "correspondence_rotation", "curve_distances", "ro
            "self_crossings", "crossing_segments", "LOOP_AREA",
            "check_simple"]
 
-# Nearest vertices whose adjacent segments are tested first in curve_distances; the rest is
-# checked exactly (see there). Measured with 4: no node of the heart pairs or of 250-node
-# hands or 150-node glyphs needs the fallback, 5 % of the 1590-node hands do; 8 is twice as
-# slow (100k nodes: 1.3 s with 4, 3.2 s with 8, on 2 loaded cores).
+# Vertices whose segments curve_distances tests first (4: 2.5x faster than 8; method.md §5).
 _K_NEAREST = 4
-# roughness: contours are resampled to this many nodes by arc length and smoothed by a
-# Gaussian of this many node spacings (0.8 % of the length): it keeps the shape's outline
-# and removes the pixel staircase of the Sunnybrook hearts (1 px steps on ~250 px contours).
+# roughness: resampled to this many nodes, smoothed over _ROUGH_SIGMA spacings (method.md §5).
 _ROUGH_NODES = 512
 _ROUGH_SIGMA = 4.0
 # Pairs of segments tested at once in self_crossings (memory: ~50 bytes a pair).
@@ -234,9 +229,7 @@ def crossing_segments(points, closed: bool = True) -> np.ndarray:
         np.empty((0, 2), dtype=np.intp)
 
 
-# A crossing whose loop encloses more than this x the squared RMS radius makes a contour
-# not one simple curve: the annotation loops of the statismo hands are below 4e-5, a
-# pentagram's tips 0.1, a figure eight's lobes 1.3.
+# Loops above this x size^2 make a contour not simple (hands' noise < 4e-5; method.md §5).
 LOOP_AREA = 1e-3
 
 

@@ -78,7 +78,8 @@ class Shape:
     ------
     ShapeError
         If the points are not finite, not of shape (m, 2) or (m, 3), fewer than 3, contain
-        repeated nodes, or all lie (nearly) at one point.
+        repeated nodes, or all lie (nearly) at one point; or if ``closed`` or ``ordered``
+        is not a boolean.
     """
 
     points: np.ndarray
@@ -88,6 +89,11 @@ class Shape:
     frame: ImageFrame | None = None
 
     def __post_init__(self):
+        for name in ("closed", "ordered"):  # "no" is a true string: refuse it by name
+            value = getattr(self, name)
+            if not isinstance(value, bool | np.bool_) and not (name == "ordered"
+                                                               and value is None):
+                raise ShapeError(f"{name} must be True or False, got {value!r}")
         pts = _validate_points(self.points, "points")
         pts.setflags(write=False)
         object.__setattr__(self, "points", pts)

@@ -32,10 +32,13 @@ in the input's units.
 
 from ._draw import (
     COLOR_BY,
+    DISTANCE_NAME,
     ENERGY_COLORS,
     ENERGY_UNIT,
     IMAGE_ALPHA,
     MATCH_COLOR,
+    MEAN_DISTANCE_NAME,
+    NO_DEFORMATION,
     SHAPE_COLOR,
     SOURCE_COLOR,
     TARGET_COLOR,
@@ -69,6 +72,7 @@ __all__ = [
     "save_track_figures",
     # limits, resolutions and the palette
     "COLOR_BY",
+    "DISTANCE_NAME",
     "ENERGY_COLORS",
     "ENERGY_UNIT",
     "FIGURE_DPI",
@@ -77,6 +81,8 @@ __all__ = [
     "MATCH_COLOR",
     "MAX_ANIMATION_FRAMES",
     "MAX_FIGURE_SHAPES",
+    "MEAN_DISTANCE_NAME",
+    "NO_DEFORMATION",
     "RASTER_SEGMENTS",
     "SHAPE_COLOR",
     "SOURCE_COLOR",

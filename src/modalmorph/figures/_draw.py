@@ -21,22 +21,31 @@ SOURCE_COLOR = "black"
 TARGET_COLOR = "#d81b60"  # a strong magenta-red, absent from the colour maps below
 MATCH_COLOR = "0.55"  # mid grey: the matches stay behind the two objects
 SHAPE_COLOR = "#1f4e99"  # the moving shape when not coloured by a quantity
+# The two distances a morph reports, each under its own name everywhere it is shown:
+DISTANCE_NAME = "distance (stop test)"  # Morph.distance, compared with Morph.tolerance
+MEAN_DISTANCE_NAME = "mean distance of matched pairs"  # Morph.mean_distance, per step
+MEAN_DISTANCE_COLOR = "#d95f02"
 ENERGY_UNIT = "$k_{ref} L^2$"  # energy unit: one node's stiffness x the source's RMS radius^2
 _LABELS = {  # colour bars; {unit}: the coordinates' unit
     "load": "load magnitude $\\|R_i\\|$ (k x {unit})",
-    "energy": f"strain energy per node $e_i$ ({ENERGY_UNIT})",
+    "energy": f"strain energy per node $e_i$, signed ({ENERGY_UNIT})",
     None: "step",
 }
 # Figure sizes (inches) and fixed margins (constrained layout took 0.79 s, not 0.56 s):
 # shapes with a colour bar on the right (room for its label), shapes without one, and
-# charts (a twin axis on the right); legends above.
+# charts (a twin axis on the right); legends above (the energy's: four lines and a title).
 _LAYOUTS = {
     "bar": ((6.4, 5.4), dict(left=0.11, right=0.86, bottom=0.09, top=0.86)),
     "wide": ((6.4, 5.4), dict(left=0.11, right=0.97, bottom=0.09, top=0.86)),
-    "chart": ((6.4, 4.2), dict(left=0.12, right=0.87, bottom=0.12, top=0.80)),
+    "chart": ((6.4, 4.4), dict(left=0.12, right=0.87, bottom=0.11, top=0.74)),
 }
+MARGIN = 0.04  # around what is drawn, on every side: a fraction of its larger side (as 3D had)
 IMAGE_ALPHA = 0.25  # black shows as 75 % grey; 0.4 hid the horse's light early steps
 ENERGY_COLORS = ("#3b4cc0", "0.6", "#b40426")  # coolwarm's ends; its 87 % grey hid e_i ~ 0
+# Percentiles of the local energy spanned by its colours (issue 21): on a CSV glyph, SVG,
+# horse mask and OFF egg the largest |e_i| was 1.1-5.9x this range; scaled to it, most grey.
+ENERGY_RANGE = (2.0, 98.0)
+NO_DEFORMATION = 1e-12  # |e_i| below this (k_ref L^2) is round-off: a translation gave 2e-14
 
 
 def import_matplotlib():
@@ -202,26 +211,44 @@ def draw_image(ax, view: View) -> bool:
 
 
 def finish_axes(ax, points: np.ndarray, view: View = View(), *, image: bool = False):
-    """Equal aspect, axis labels with units, limits fitted to ``points`` (any (N, d)) or
-    to the image when drawn; y pointing down for image coordinates."""
+    """Equal aspect, axis labels with units, limits fixed to ``points`` (any (N, d)) and
+    to the image when drawn; y pointing down for image coordinates.
+
+    The limits are set once, explicitly: the box of ``points`` grown by :data:`MARGIN` of
+    its larger side on every side (and to the whole image when drawn), then widened about
+    its centre to the axes' aspect (2D); autoscaling is off. What is drawn later, the
+    frames of an animation above all, lands where it was computed instead of rescaling
+    the axes (the GIF drew a shape up to 2.2x its size when the first frame rescaled
+    them). Lay out what takes room from the axes (a colour bar) before this.
+    """
     names = ("x", "y", "z")[: points.shape[1]]
     labels = {f"{a}label": f"{a} ({view.unit})" for a in names}
-    if is_3d(ax):
-        lo, hi = points.min(axis=0), points.max(axis=0)
-        pad = 0.04 * max(float(np.max(hi - lo)), 1e-12)
-        ax.set(xlim=(lo[0] - pad, hi[0] + pad), ylim=(lo[1] - pad, hi[1] + pad),
-               zlim=(lo[2] - pad, hi[2] + pad), **labels)
-        ax.set_box_aspect(np.maximum(hi - lo + 2 * pad, 1e-12))
-        return
-    if image:
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    pad = MARGIN * max(float(np.max(hi - lo)), 1e-12)
+    lo, hi = lo - pad, hi + pad
+    if image:  # the whole image, no margin beyond it
         h, w = view.size
-        points = np.vstack([points, [[-0.5, -0.5], [w - 0.5, h - 0.5]]])
-    ax.update_datalim(points)
-    ax.autoscale_view()
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set(**labels)
-    if view.y_down:
-        ax.yaxis.set_inverted(True)  # (keeps autoscaling: the aspect may widen the limits)
+        lo, hi = np.minimum(lo, [-0.5, -0.5]), np.maximum(hi, [w - 0.5, h - 0.5])
+    if is_3d(ax):
+        ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), zlim=(lo[2], hi[2]), **labels)
+        ax.set_box_aspect(np.maximum(hi - lo, 1e-12))
+        return
+    ax.set_aspect("equal", adjustable="datalim")  # kept by a layout engine's resizing
+    # the box the aspect is applied to (an image's own aspect may have shrunk the active one)
+    box = ax.get_position(original=True).transformed(ax.figure.transFigure)
+    lo, hi = fit_aspect(lo, hi, box.height / box.width)
+    ax.set(xlim=(lo[0], hi[0]), ylim=(hi[1], lo[1]) if view.y_down else (lo[1], hi[1]),
+           **labels)
+
+
+def fit_aspect(lo: np.ndarray, hi: np.ndarray, ratio: float) -> tuple:
+    """The 2D box (lo, hi) widened about its centre to height / width = ``ratio``."""
+    centre, span = 0.5 * (lo + hi), hi - lo
+    if span[1] < ratio * span[0]:
+        span = np.array([span[0], ratio * span[0]])
+    else:
+        span = np.array([span[1] / ratio, span[1]])
+    return centre - 0.5 * span, centre + 0.5 * span
 
 
 # ------------------------------------------------------------------------ colouring
@@ -243,17 +270,31 @@ def node_values(morph, color_by) -> np.ndarray:
     return np.broadcast_to(steps[:, None], shapes.shape[:2])
 
 
-def colormap(color_by, values: np.ndarray):
-    """(cmap, norm) for the values shown; zero is grey or dark, never white.
+@dataclass(frozen=True)
+class Scale:
+    """A colour scale: the map, its norm, which ends of the bar are clipped (``extend``:
+    "neither", "min", "max" or "both", drawn as arrows) and ``flat``: every value is zero
+    to round-off (one colour, labelled "no deformation")."""
 
-    Loads are magnitudes (>= 0): viridis from 0, cut before its pale yellow end. The local
-    strain energy (25) has both signs (on the bundled heart and hands, its minimum is -5
-    to -63 % of its maximum, with either ``free_motion``): blue (< 0), grey (0), red
-    (> 0) on one scale both sides of 0 (:data:`ENERGY_COLORS`); from grey to red when no
-    value is negative. Steps: blues from light (early) to dark (late).
+    cmap: object
+    norm: object
+    extend: str = "neither"
+    flat: bool = False
+
+
+def colormap(color_by, values: np.ndarray) -> Scale:
+    """The colour scale of the values shown; zero is grey or dark, never white.
+
+    Loads are magnitudes (>= 0): viridis from 0, cut before its pale yellow end. Steps:
+    blues from light (early) to dark (late). The local strain energy (25) is signed (on
+    the bundled heart and hands its minimum is -5 to -63 % of its maximum) and a few
+    nodes can hold most of it: its colours span the :data:`ENERGY_RANGE` percentiles of
+    the values, symmetric about 0 (blue < 0, grey 0, red > 0, :data:`ENERGY_COLORS`;
+    grey to red when none is negative), the values beyond drawn in the end colours. All
+    values below :data:`NO_DEFORMATION` (a rigid motion's round-off): one grey, ``flat``.
     """
     import matplotlib as mpl
-    from matplotlib.colors import CenteredNorm, LinearSegmentedColormap, ListedColormap, Normalize
+    from matplotlib.colors import ListedColormap, Normalize
 
     def part(name, lo, hi):
         return ListedColormap(mpl.colormaps[name](np.linspace(lo, hi, 256)), name=name)
@@ -262,33 +303,57 @@ def colormap(color_by, values: np.ndarray):
     top = float(np.max(np.abs(finite))) if finite.size else 1.0
     top = top if top > 0 else 1.0
     if color_by == "load":
-        return part("viridis", 0.0, 0.92), Normalize(0.0, top)
+        return Scale(part("viridis", 0.0, 0.92), Normalize(0.0, top))
     if color_by == "energy":
-        if finite.size and finite.min() < 0:
-            return (LinearSegmentedColormap.from_list("energy", ENERGY_COLORS),
-                    CenteredNorm(0.0, halfrange=top))
-        return (LinearSegmentedColormap.from_list("energy", ENERGY_COLORS[1:]),
-                Normalize(0.0, top))
-    return part("Blues", 0.35, 1.0), Normalize(0.0, max(float(values.max()), 1.0))
+        return _energy_scale(finite)
+    return Scale(part("Blues", 0.35, 1.0), Normalize(0.0, max(float(values.max()), 1.0)))
 
 
-def colorbar(ax, mappable, color_by, *, unit: str, values=None):
-    """A colour bar labelled with the quantity and its unit, spanning the values shown
-    (a signed quantity's bar from its minimum to its maximum, 0 at the map's middle)."""
-    kw = {"shrink": 0.75, "pad": 0.08} if is_3d(ax) else {"pad": 0.03, "fraction": 0.06}
-    cbar = ax.figure.colorbar(mappable, ax=ax, label=_LABELS[color_by].replace("{unit}", unit),
-                              **kw)
+def _energy_scale(finite: np.ndarray) -> Scale:
+    """:func:`colormap` of the local strain energy (finite values)."""
+    from matplotlib.colors import CenteredNorm, LinearSegmentedColormap, ListedColormap, Normalize
+
+    if not finite.size or np.max(np.abs(finite)) < NO_DEFORMATION:
+        return Scale(ListedColormap([ENERGY_COLORS[1]], name="flat"),
+                     CenteredNorm(0.0, halfrange=1.0), flat=True)
+    lo, hi = np.percentile(finite, ENERGY_RANGE)
+    signed = finite.min() < 0
+    half = max(-float(lo), float(hi)) if signed else float(hi)
+    if half < NO_DEFORMATION:  # nearly all zero, a few nodes strained: span those
+        half = float(np.max(np.abs(finite)))
+    below, above = signed and finite.min() < -half, finite.max() > half
+    extend = {(False, False): "neither", (True, False): "min", (False, True): "max",
+              (True, True): "both"}[(bool(below), bool(above))]
+    if signed:
+        return Scale(LinearSegmentedColormap.from_list("energy", ENERGY_COLORS),
+                     CenteredNorm(0.0, halfrange=half), extend)
+    return Scale(LinearSegmentedColormap.from_list("energy", ENERGY_COLORS[1:]),
+                 Normalize(0.0, half), extend)
+
+
+def colorbar(ax, mappable, color_by, *, unit: str, scale: Scale | None = None,
+             label: str | None = None):
+    """A colour bar labelled with the quantity and its unit (``label`` replaces the
+    quantity's name); clipped ends as arrows; a flat energy as one colour, "no
+    deformation"."""
+    # 3D: the z label sits right of the box, beyond the tick labels; a pad of 0.08 put the
+    # bar over it (shapes_*.png of a 3D morph), 0.2 clears it at the "bar" layout's size
+    kw = {"shrink": 0.7, "pad": 0.2} if is_3d(ax) else {"pad": 0.03, "fraction": 0.06}
+    text = _LABELS[color_by] if label is None else label
+    if scale is not None and scale.flat:
+        text = f"no deformation: $|e_i|$ < {NO_DEFORMATION:.0e} {ENERGY_UNIT}"
+    cbar = ax.figure.colorbar(mappable, ax=ax, label=text.replace("{unit}", unit),
+                              extend="neither" if scale is None else scale.extend, **kw)
     if color_by is None:
         from matplotlib.ticker import MaxNLocator
 
         n_steps = int(mappable.norm.vmax) + 1
         cbar.locator = MaxNLocator(integer=True, nbins=min(n_steps, 10))
         cbar.update_ticks()
+    elif scale is not None and scale.flat:
+        cbar.set_ticks([0.0], labels=["0"])
     elif color_by == "energy":
         cbar.formatter.set_powerlimits((-3, 4))
-        finite = values[np.isfinite(values)] if values is not None else np.empty(0)
-        if finite.size and finite.min() < 0 < finite.max():
-            cbar.ax.set_ylim(float(finite.min()), float(finite.max()))
     return cbar
 
 

@@ -1,5 +1,6 @@
 """The animation of a morph: a GIF (Pillow) or an MP4 (ffmpeg), one step per frame, the
-fixed parts drawn once and each frame only the moving shape over them."""
+fixed parts drawn once in fixed axes and each frame only the moving shape and its title
+over them; one drawing path (:func:`render_frames`) for both formats."""
 
 from __future__ import annotations
 
@@ -40,8 +41,10 @@ def animate(morph, path, *, fps: int = 10, color_by="energy", dpi: int = GIF_DPI
     """Write an animation of the deformation.
 
     Each frame shows the shape at one step coloured per node (as :func:`plot_shapes`,
-    one colour scale for all frames), the source and the target drawn faintly; the fixed
-    parts are drawn once, each frame only the moving shape over them.
+    one colour scale for all frames), the source and the target drawn faintly, and is
+    titled with its step and time (a track's frame: its name). The axes are fixed once
+    for the whole animation; the fixed parts are drawn once, each frame only the moving
+    shape over them.
 
     Parameters
     ----------
@@ -85,7 +88,11 @@ def animate(morph, path, *, fps: int = 10, color_by="energy", dpi: int = GIF_DPI
     # a unique name beside the target, same suffix (ffmpeg picks its format from it)
     tmp = path.with_name(f".{path.stem}.{os.getpid()}-{secrets.token_hex(4)}.tmp{suffix}")
     try:
-        _write_animation(scene, steps, tmp, fps=fps, dpi=dpi)
+        images = render_frames(scene, steps)
+        if suffix == ".gif":
+            _write_gif(images, tmp, fps=fps)
+        else:
+            _write_mp4(images, tmp, fps=fps)
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
@@ -93,30 +100,43 @@ def animate(morph, path, *, fps: int = 10, color_by="energy", dpi: int = GIF_DPI
     return path
 
 
-def _write_animation(scene, steps, path: Path, *, fps: int, dpi: int) -> None:
-    """Write the frames of ``steps``: a GIF with Pillow, an MP4 with ffmpeg."""
-    if path.suffix.lower() == ".gif":
-        images = _gif_frames(scene, steps)
-        images[0].save(path, format="GIF", save_all=True, append_images=images[1:],
-                       duration=round(1000 / fps), loop=0)
-        return
-    from matplotlib import animation
-
-    writer = animation.FFMpegWriter(fps=fps)
-    with writer.saving(scene.fig, path, dpi=dpi):
-        for j in steps:
-            scene.show(j)
-            writer.grab_frame()
-
-
-def _gif_frames(scene, steps) -> list:
-    """The frames as palette images: the fixed parts rendered once (Agg), then for each
-    step that background restored and only the moving shape and the title drawn."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
+def _write_gif(images: list, path: Path, *, fps: int) -> None:
+    """The frames (RGB arrays) as a looping GIF of palette images (Pillow)."""
     from PIL import Image
 
+    frames = [Image.fromarray(rgb).quantize(colors=255, method=Image.Quantize.FASTOCTREE)
+              for rgb in images]
+    frames[0].save(path, format="GIF", save_all=True, append_images=frames[1:],
+                   duration=round(1000 / fps), loop=0)
+
+
+def _write_mp4(images: list, path: Path, *, fps: int) -> None:
+    """The frames (RGB arrays) as an H.264 MP4: raw frames piped to ffmpeg (the command
+    matplotlib's FFMpegWriter runs, fed the frames the GIF is made of)."""
+    import subprocess
+
+    from matplotlib import animation
+
+    h, w = images[0].shape[:2]
+    cmd = [animation.FFMpegWriter.bin_path(), "-loglevel", "error", "-f", "rawvideo",
+           "-vcodec", "rawvideo", "-s", f"{w}x{h}", "-pix_fmt", "rgb24", "-r", str(fps),
+           "-i", "pipe:", "-vcodec", "h264", "-pix_fmt", "yuv420p",
+           "-vf", "scale=trunc(iw/2)*2:trunc(ih/2)*2", "-y", str(path)]
+    done = subprocess.run(cmd, input=b"".join(rgb.tobytes() for rgb in images),
+                          capture_output=True, check=False)
+    if done.returncode:
+        raise OSError(f"ffmpeg could not write {path.name}: "
+                      f"{done.stderr.decode(errors='replace').strip()[-300:]}")
+
+
+def render_frames(scene, steps) -> list:
+    """The frames of ``steps`` as RGB arrays (h, w, 3), the one drawing path of the GIF
+    and the MP4: the fixed parts rendered once (Agg), then for each step that background
+    restored and only the moving shape and the title drawn, in the fixed axes."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
     canvas = FigureCanvasAgg(scene.fig)
-    scene.ax.title.set_animated(True)
+    scene.show(steps[0], animated=True)  # the title in place when the layout is drawn
     canvas.draw()
     clean = canvas.copy_from_bbox(scene.fig.bbox)
     images = []
@@ -126,44 +146,46 @@ def _gif_frames(scene, steps) -> list:
             if hasattr(artist, "do_3d_projection"):
                 artist.do_3d_projection()  # (what Axes3D.draw does before drawing)
             scene.ax.draw_artist(artist)
-        scene.ax.draw_artist(scene.ax.title)
-        rgb = Image.fromarray(np.asarray(canvas.buffer_rgba())[..., :3])
-        images.append(rgb.quantize(colors=255, method=Image.Quantize.FASTOCTREE))
+        scene.ax.draw_artist(scene.title)
+        images.append(np.array(np.asarray(canvas.buffer_rgba())[..., :3]))
     return images
 
 
 class _Scene:
     """An animation's figure: the fixed parts (image, faint source and target, colour
-    bar, legend) laid out once; :meth:`show` draws the shape at one step over them."""
+    bar, legend) laid out once in fixed axes; :meth:`show` draws the shape at one step
+    over them and titles the frame with its step and time (a track: its frame's name)."""
 
     def __init__(self, morph, color_by, *, background: bool, dpi: int):
         shapes = np.asarray(morph.shapes, dtype=np.float64)
         _, closed, ordered, faces = describe(morph.source, "morph.source")
         self.shapes, self.last = shapes, len(shapes) - 1
+        self.names = getattr(morph, "names", None)
+        self.dt = getattr(getattr(morph, "options", None), "dt", None)
         self.faces = faces if faces is not None and len(faces) else None
         self.edges = edges_of(shapes.shape[1], closed, ordered, None)
-        if color_by is None:
-            self.values, self.cmap, self.norm = np.zeros(shapes.shape[:2]), None, None
-        else:
-            self.values = node_values(morph, color_by)
-            self.cmap, self.norm = colormap(color_by, self.values)
+        self.values = np.zeros(shapes.shape[:2]) if color_by is None else \
+            node_values(morph, color_by)
+        scale = None if color_by is None else colormap(color_by, self.values)
+        self.cmap, self.norm = (None, None) if scale is None else (scale.cmap, scale.norm)
         self.fig, self.ax = new_figure(shapes.shape[2])
         self.fig.set_dpi(dpi)
         view = view_of(morph.target, morph.source, background=background)
         image = draw_image(self.ax, view)
-        handles = _faint_ends(self.ax, shapes[0], morph.source, morph.target)
-        tgt = describe(morph.target, "morph.target")[0]
-        finish_axes(self.ax, np.vstack([shapes.reshape(-1, shapes.shape[2]), tgt]), view,
-                    image=image)
-        if color_by is not None:
+        handles = _faint_ends(self.ax, shapes[0], morph.source, morph.target, self.names)
+        if scale is not None:  # before the limits are fixed: the bar takes its room
             from matplotlib.cm import ScalarMappable
 
             colorbar(self.ax, ScalarMappable(norm=self.norm, cmap=self.cmap), color_by,
-                     unit=view.unit, values=self.values)
+                     unit=view.unit, scale=scale)
+        tgt = describe(morph.target, "morph.target")[0]
+        finish_axes(self.ax, np.vstack([shapes.reshape(-1, shapes.shape[2]), tgt]), view,
+                    image=image)
         handles.insert(0, _current_handle(self.cmap, self.faces is not None,
                                           bool(len(self.edges))))
         self.ax.legend(handles=handles, loc="lower right", bbox_to_anchor=(1.0, 1.0),
-                       ncols=3, frameon=False, fontsize="small")  # step number: left
+                       ncols=3, frameon=False, fontsize="small")  # the frame's title above it
+        self.title = self.ax.set_title(" ", loc="left", fontsize="medium", pad=18)
         self.artists = []
 
     def show(self, j: int, *, animated: bool = False) -> list:
@@ -174,21 +196,31 @@ class _Scene:
                                    self.values[j], self.cmap, self.norm)
         for artist in self.artists:
             artist.set_animated(animated)
-        self.ax.set_title(f"step {j} / {self.last}", loc="left", fontsize="medium")
+        self.title.set_text(self.caption(j))
+        self.title.set_animated(animated)
         return self.artists
 
+    def caption(self, j: int) -> str:
+        """The title of step ``j``'s frame: its step and time, or a track's frame name."""
+        if self.names is not None:
+            return f"{self.names[j]} (frame {j + 1} of {self.last + 1})"
+        time = "" if self.dt is None else f", t = {j * self.dt:.3g} / $\\omega_{{ref}}$"
+        return f"step {j} / {self.last}{time}"
 
-def _faint_ends(ax, start, source, target) -> list:
+
+def _faint_ends(ax, start, source, target, names=None) -> list:
     """The fixed background of the animation, faint: the source at step 0 (``start``) and
-    the target, contours as lines, surfaces and clouds as nodes; their legend handles."""
+    the target, contours as lines, surfaces and clouds as nodes; their legend handles
+    (labelled by the first and last frames' ``names`` for a track)."""
     from matplotlib.lines import Line2D
 
     _, s_closed, s_ordered, _ = describe(source, "morph.source")
     tgt, t_closed, t_ordered, _ = describe(target, "morph.target")
+    first, last = ("source", "target") if names is None else (names[0], names[-1])
     handles = []
     for pts, closed, ordered, color, marker, label in (
-        (start, s_closed, s_ordered, SOURCE_COLOR, "o", "source"),
-        (tgt, t_closed, t_ordered, TARGET_COLOR, "s", "target"),
+        (start, s_closed, s_ordered, SOURCE_COLOR, "o", first),
+        (tgt, t_closed, t_ordered, TARGET_COLOR, "s", last),
     ):
         e = edges_of(len(pts), closed, ordered, None)
         if len(e):

@@ -10,8 +10,12 @@ from pathlib import Path
 import numpy as np
 
 from ._draw import (
+    DISTANCE_NAME,
     ENERGY_UNIT,
     MATCH_COLOR,
+    MEAN_DISTANCE_COLOR,
+    MEAN_DISTANCE_NAME,
+    NO_DEFORMATION,
     SHAPE_COLOR,
     SOURCE_COLOR,
     TARGET_COLOR,
@@ -199,7 +203,8 @@ def plot_shapes(morph, *, color_by="energy", every: int = 1, frames: str = "time
     view = view_of(morph.target, morph.source, background=background)
     image = draw_image(ax, view)
     values = node_values(morph, color_by)
-    cmap, norm = colormap(color_by, values)
+    scale = colormap(color_by, values)
+    cmap, norm = scale.cmap, scale.norm
     drawn = _drawn_steps(len(shapes), every, frames, morph)
     edges = edges_of(shapes.shape[1], closed, ordered, faces)
     contour = faces is None and len(edges) > 0
@@ -214,7 +219,7 @@ def plot_shapes(morph, *, color_by="energy", every: int = 1, frames: str = "time
     t_line = _draw_ends(ax, morph.target, shapes[0], tgt)
     kind = "contour" if contour else "surface" if faces is not None and len(faces) else "cloud"
     _shapes_legend(ax, morph, cmap(0.75), kind, color_by, t_line)
-    colorbar(ax, lines, color_by, unit=view.unit, values=values[drawn])
+    colorbar(ax, lines, color_by, unit=view.unit, scale=scale)
     finish_axes(ax, np.vstack([shapes.reshape(-1, shapes.shape[2]), tgt]), view, image=image)
     return ax
 
@@ -281,31 +286,44 @@ def _shapes_legend(ax, morph, mid, kind: str, color_by, t_line: bool):
 
     last = len(morph.shapes) - 1
     aligned = getattr(morph, "similarity", None) is not None
+    names = getattr(morph, "names", None)  # a tracked sequence: its frames' names
+    end = f"step {last}" if names is None else names[-1]
     handles = [Line2D([], [], color=SOURCE_COLOR, marker="o", ms=4, ls="none"),
                Line2D([], [], color=mid, lw=1.5 if kind == "contour" else 1.0)]
-    labels = [f"source{' (aligned)' if aligned else ''} (step 0)",
-              f"intermediate shapes (steps 1-{last})" if kind == "contour" else "node paths"]
+    if names is None:
+        labels = [f"source{' (aligned)' if aligned else ''} (step 0)",
+                  f"intermediate shapes (steps 1-{last})"]
+    else:
+        labels = [f"{names[0]} (first frame)", "tracked shape, frame by frame"]
+    if kind != "contour":
+        labels[1] = "node paths"
     if kind == "surface":
         handles.append(Patch(facecolor="0.8" if color_by is None else mid, edgecolor="0.35"))
-        labels.append(f"final surface (step {last})")
+        labels.append(f"final surface ({end})")
     elif kind == "cloud":
         handles.append(Line2D([], [], color=mid, marker="o", ms=4, ls="none"))
-        labels.append(f"final nodes (step {last})")
+        labels.append(f"final nodes ({end})")
     handles.append(Line2D([], [], color=TARGET_COLOR, marker="s", ms=4,
                           ls="--" if t_line else "none"))
-    labels.append("target")
+    labels.append("target" if names is None else f"{names[-1]} (observed)")
     legend_above(ax, handles, labels)
 
 
 def plot_energy(morph, *, ax=None):
-    """Global strain energy per step, with the mean distance to the target on a twin axis.
+    """Global strain energy per step; on a twin axis the mean distance of the matched
+    pairs per step and, at the last step, the stop test's distance and its tolerance.
+
+    The stop test's distance (:attr:`Morph.distance`, the one ``converged`` compares with
+    ``tolerance``) is measured at the end only; the matched pairs' mean distance per step
+    is a different measure, named as such.
 
     Parameters
     ----------
     morph : Morph
-        A morph result: uses ``energy``, ``mean_distance`` and ``message``.
+        A morph result: uses ``energy``, ``mean_distance``, ``message`` and, when there,
+        ``distance`` and ``tolerance``.
     ax : matplotlib Axes, optional
-        Where to draw the energy; the distance goes on ``ax.twinx()``.
+        Where to draw the energy; the distances go on ``ax.twinx()``.
 
     Returns
     -------
@@ -313,33 +331,54 @@ def plot_energy(morph, *, ax=None):
         The energy axes; the distance axes is its twin (the figure's last Axes).
     """
     energy = np.asarray(morph.energy, dtype=np.float64)
-    distance = np.asarray(morph.mean_distance, dtype=np.float64)
     if ax is None:
         ax = new_axes(2, "chart")
     from matplotlib.ticker import MaxNLocator
 
     steps = np.arange(len(energy))
     marker = "o" if len(steps) <= 40 else None
+    flat = not np.nanmax(np.abs(energy), initial=0.0) >= NO_DEFORMATION  # round-off only
     (e_line,) = ax.plot(steps, energy, color=SHAPE_COLOR, marker=marker, ms=4,
-                        label="global strain energy $E$ (22)")
+                        label="global strain energy $E$ (22)"
+                        + (f": none (< {NO_DEFORMATION:.0e})" if flat else ""))
     ax.set(xlabel="step", ylabel=f"global strain energy $E$ ({ENERGY_UNIT})",
            xlim=(0, max(len(steps) - 1, 1)))
-    ax.set_ylim(bottom=min(0.0, float(np.nanmin(energy))))
+    if flat:  # zero drawn as zero, not round-off magnified into a curve
+        ax.set_ylim(-1.0, 1.0)
+    else:
+        ax.set_ylim(bottom=min(0.0, float(np.nanmin(energy))))
     ax.yaxis.get_major_formatter().set_powerlimits((-3, 4))
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.grid(True, alpha=0.3)
-    twin = ax.twinx()
-    (d_line,) = twin.plot(steps, distance, color="#d95f02", ls="--", marker=marker, ms=4,
-                          mfc="white", label="mean distance to target")
-    twin.set_ylabel(f"mean distance to target ({view_of(morph.target, morph.source).unit})")
-    twin.set_ylim(bottom=0.0)
-    import textwrap
-
+    handles = [e_line, *_distance_lines(ax.twinx(), morph, steps, marker)]
     status = "converged" if getattr(morph, "converged", False) else "not converged"
-    reason = textwrap.fill(getattr(morph, "message", "") or status, 70)
-    legend_above(ax, [e_line, d_line], [e_line.get_label(), d_line.get_label()],
-                 title=reason, title_fontsize="small")
+    # one clause a line: a sentence wrapped at a width broke "0.135 input | units"
+    reason = (getattr(morph, "message", "") or status).replace(", ", ",\n")
+    legend_above(ax, handles, [h.get_label() for h in handles], title=reason,
+                 title_fontsize="small")
     return ax
+
+
+def _distance_lines(twin, morph, steps, marker) -> list:
+    """On ``twin``: the matched pairs' mean distance per step, and the stop test's
+    distance (a point at the last step) and tolerance (a line) when the morph has them."""
+    unit = view_of(morph.target, morph.source).unit
+    distance = np.asarray(morph.mean_distance, dtype=np.float64)
+    (pairs,) = twin.plot(steps, distance, color=MEAN_DISTANCE_COLOR, ls="--", marker=marker,
+                         ms=4, mfc="white", label=MEAN_DISTANCE_NAME)
+    twin.set_ylabel(f"distance ({unit})")
+    twin.set_ylim(bottom=0.0)
+    lines = [pairs]
+    stop, tol = getattr(morph, "distance", None), getattr(morph, "tolerance", None)
+    if tol is not None and np.isfinite(tol):
+        lines.append(twin.axhline(tol, color=TARGET_COLOR, ls=":", lw=1.4,
+                                  label=f"tolerance {tol:.3g}"))
+    if stop is not None and np.isfinite(stop):
+        (point,) = twin.plot([steps[-1]], [stop], color=TARGET_COLOR, marker="*", ms=11,
+                             ls="none", clip_on=False, zorder=5,
+                             label=f"{DISTANCE_NAME}: {stop:.3g}")
+        lines.append(point)
+    return lines
 
 
 def save_figures(morph, out_dir, *, formats=("png", "svg"), dpi: int = FIGURE_DPI,

@@ -18,6 +18,7 @@ from ._draw import (
     edges_of,
     finish_axes,
     import_matplotlib,
+    legend_above,
     line_collection,
     new_axes,
     save_draws,
@@ -26,6 +27,8 @@ from ._draw import (
 from .animation import animate
 from .morph import plot_shapes
 
+MAX_NAMED_FRAMES = 12  # frames named one by one on an axis at most (longer names overlap)
+
 
 def _as_morph(track):
     """A Track seen as a morph whose steps are the frames (for plot_shapes, animate)."""
@@ -33,13 +36,27 @@ def _as_morph(track):
 
     return SimpleNamespace(shapes=track.points, node_energy=track.node_energy,
                            loads=np.zeros_like(track.points), source=track.frames[0],
-                           target=track.frames[-1], similarity=None)
+                           target=track.frames[-1], similarity=None,
+                           names=tuple(track.names))
+
+
+def _name_frames(axis, names, *, at_most: int = MAX_NAMED_FRAMES) -> None:
+    """Label a frame axis (or colour bar axis) 0..F-1 with the frames' names: each
+    frame when there are few, else a few of them."""
+    from matplotlib.ticker import FixedLocator, FuncFormatter, MaxNLocator
+
+    if len(names) <= at_most:
+        axis.set_major_locator(FixedLocator(range(len(names))))
+    else:
+        axis.set_major_locator(MaxNLocator(integer=True, nbins=at_most))
+    axis.set_major_formatter(FuncFormatter(
+        lambda v, _: names[int(round(v))] if 0 <= round(v) < len(names) else ""))
 
 
 def plot_trajectories(track, *, every: int = 1, background: bool = True, ax=None):
     """Draw the path of every ``every``-th tracked node over the frames, coloured by
-    frame, over frame 0's shape (black) and the last frame's (magenta), and over the last
-    frame's image when it was read from one (``background``).
+    frame, over the first frame's shape (black) and the last frame's (magenta), each
+    named, and over the last frame's image when it was read from one (``background``).
 
     Returns the Axes."""
     check_every(every)
@@ -63,13 +80,11 @@ def plot_trajectories(track, *, every: int = 1, background: bool = True, ax=None
         if len(edges) and faces is None:
             ax.add_collection(line_collection(pts[edges], ax, colors=color, linewidths=0.8,
                                               zorder=3))
-        ax.scatter(*pts.T, s=6, c=color, linewidths=0, zorder=4, label=f"frame {f}")
-    ax.legend(loc="best", fontsize="small")
-    from matplotlib.ticker import MaxNLocator
-
+        ax.scatter(*pts.T, s=6, c=color, linewidths=0, zorder=4, label=track.names[f])
+    handles, labels = ax.get_legend_handles_labels()
+    legend_above(ax, handles, labels)
     cbar = ax.figure.colorbar(lines, ax=ax, label="frame", shrink=0.8)
-    cbar.locator = MaxNLocator(integer=True)
-    cbar.update_ticks()
+    _name_frames(cbar.ax.yaxis, track.names)
     finish_axes(ax, points.reshape(-1, dim), view, image=image)
     return ax
 
@@ -89,16 +104,17 @@ def plot_track_curves(track, *, ax=None):
     ax.plot(frames, 100 * track.strain, color="black", lw=2.2, label="global")
     ax.axhline(0, color="0.7", lw=0.8)
     ax.set_xlabel("frame")
-    ax.xaxis.get_major_locator().set_params(integer=True)
-    ax.set_ylabel("strain against frame 0 (%)")
+    _name_frames(ax.xaxis, track.names)
+    if track.n_frames <= MAX_NAMED_FRAMES and max(map(len, track.names)) > 6:
+        ax.tick_params(axis="x", labelrotation=30)
+    ax.set_ylabel(f"strain against {track.names[0]} (%)")
     right = ax.twinx()
     right.plot(frames, track.cumulative_energy, color=TARGET_COLOR, ls="--", lw=1.5,
                label="cumulative energy")
     right.set_ylabel(f"cumulative strain energy (22) ({ENERGY_UNIT})", color=TARGET_COLOR)
     handles = ax.get_legend_handles_labels()
     more = right.get_legend_handles_labels()
-    ax.legend(handles[0] + more[0], handles[1] + more[1], fontsize="small", ncols=3,
-              loc="lower left")
+    legend_above(ax, handles[0] + more[0], handles[1] + more[1])  # hides no curve
     return ax
 
 

@@ -61,7 +61,16 @@ from .atomic import (
     atomic_write,
     remove_leftovers,
 )
-from .base import DEFAULT_NODES, RawShape, Reader, make_shape
+from .base import (
+    DEFAULT_NODES,
+    FLIPPED_FRAME,
+    UNEVEN_SPACING,
+    RawShape,
+    Reader,
+    make_shape,
+    uneven_nodes,
+    y_down,
+)
 from .gltf import write_gltf
 from .guard import READ_SECONDS, guarded, read_guarded
 from .images import INSIDE_FRACTION, MAX_PARTIAL_ALPHA, MIN_OBJECT_PIXELS, read_image
@@ -87,6 +96,7 @@ __all__ = [
     "RawShape",
     "SUPPORTED_EXTENSIONS",
     "SVG_FRAME",
+    "UNEVEN_SPACING",
     "atomic_output_dir",
     "atomic_write",
     "read_frames",
@@ -99,6 +109,7 @@ __all__ = [
     "write_gltf",
     "write_step_meshes",
     "write_vtk_series",
+    "y_down",
 ]
 
 # THE reader table: a file's extension (lower case) -> the function reading it.
@@ -127,8 +138,11 @@ def read_shape(path, options: ReadOptions | None = None, *, closed: bool | None 
         closed) is dropped.
     options : ReadOptions, optional
         How to read it: ``nodes`` (resample a 2D contour to this many nodes, equally
-        spaced by arc length; default the file's nodes for point files and
-        :data:`DEFAULT_NODES` for images and SVG; not allowed for 3D shapes),
+        spaced by arc length; default the file's nodes for point files, unless they are
+        unevenly spaced (the longest edge over :data:`UNEVEN_SPACING` times the median:
+        then ``max(DEFAULT_NODES, m)``, logged), and :data:`DEFAULT_NODES` for images and
+        SVG; not allowed for 3D shapes), ``flip_y`` (2D point files: mirror y into image
+        coordinates, y down, as images and SVG: for inputs mixing the two),
         ``threshold`` (images only: grey level separating the object from the
         background, in the image's own units, 0-255 for 8-bit images) and ``object``
         (images only: which object to outline, ``"largest"`` (not touching the border if
@@ -167,8 +181,13 @@ def read_shape(path, options: ReadOptions | None = None, *, closed: bool | None 
     if raw.drop_closing_repeat and raw.faces is None and len(pts) > 1 and np.array_equal(
             pts[0], pts[-1]):
         pts = pts[:-1]  # a closed contour written with its first node repeated
-    return make_shape(name, pts, faces=raw.faces, nodes=opts.nodes or raw.default_nodes,
-                      closed=closed, frame=raw.frame)
+    frame = raw.frame
+    if opts.flip_y and frame is None and pts.ndim == 2 and pts.shape[1] == 2:
+        pts, frame = pts * [1.0, -1.0], FLIPPED_FRAME  # y up -> image coordinates
+    nodes = opts.nodes or raw.default_nodes
+    if nodes is None and raw.faces is None:
+        nodes = uneven_nodes(name, pts, closed)
+    return make_shape(name, pts, faces=raw.faces, nodes=nodes, closed=closed, frame=frame)
 
 
 def _read_options(options: ReadOptions | None, overrides: dict) -> ReadOptions:

@@ -82,6 +82,25 @@ def _temp_sibling(folder: Path, name: str) -> Path:
     return Path(tempfile.mkdtemp(prefix=f".{name}{_TMP_TAG}{os.getpid()}-", dir=folder))
 
 
+def _umask() -> int:
+    """The process's umask, read without changing it where Linux tells it."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)  # elsewhere: set and restore (not thread-safe, but brief)
+    os.umask(mask)
+    return mask
+
+
+def _follow_umask(folder: Path) -> None:
+    """Give a folder made by :func:`tempfile.mkdtemp` (0700) the mode ``mkdir`` would."""
+    os.chmod(folder, 0o777 & ~_umask())
+
+
 def _pause_for_tests() -> None:
     seconds = os.environ.get(_PAUSE_ENV)
     if seconds:
@@ -202,6 +221,7 @@ def _put_in_place(tmp: Path, final: Path, name: str) -> Path:
     """Rename the finished ``tmp`` to ``final``; returns what is left to delete."""
     try:
         final.parent.mkdir(parents=True, exist_ok=True)
+        _follow_umask(tmp)  # the user's umask, as a folder made by mkdir (mkdtemp: 0700)
         _pause_for_tests()
         if not final.is_dir():
             os.rename(tmp, final)

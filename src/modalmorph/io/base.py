@@ -3,6 +3,7 @@ become a :class:`~modalmorph.core.shape.Shape` (:func:`make_shape`)."""
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,10 +14,47 @@ from ..core.shape import ImageFrame, Shape, resample
 from ..errors import InputFileError
 from ..options import ReadOptions
 
-__all__ = ["DEFAULT_NODES", "RawShape", "Reader", "make_shape"]
+__all__ = ["DEFAULT_NODES", "FLIPPED_FRAME", "RawShape", "Reader", "UNEVEN_SPACING",
+           "make_shape", "uneven_nodes", "y_down"]
+
+_log = logging.getLogger(__name__)
 
 # Nodes sampled along an image contour or an SVG path when ``nodes`` is not given.
 DEFAULT_NODES = 200
+# A contour from a point file whose longest edge is more than this many times its median
+# edge is resampled evenly by arc length when ``nodes`` is not given. The bundled contours
+# have 1.4-3.0 (hand 3: 3.0); a glyph drawn with 4 vertices on a straight stem and many
+# on its curves has 10 or more, and its stem then holds too few nodes for its loads.
+UNEVEN_SPACING = 4.0
+# The frame of a point file read with ``flip_y``: its y mirrored into image coordinates.
+FLIPPED_FRAME = ImageFrame(unit="input units (y mirrored)", y_down=True)
+
+
+def y_down(shape) -> bool:
+    """Whether a shape's y points down (images, SVG, ``flip_y``) rather than up."""
+    frame = getattr(shape, "frame", None)
+    return frame is not None and frame.y_down
+
+
+def uneven_nodes(name: str, pts: np.ndarray, closed: bool) -> int | None:
+    """Nodes to resample an unevenly spaced 2D contour to (logged), or None to keep it.
+
+    ``max(DEFAULT_NODES, m)`` when the longest edge exceeds :data:`UNEVEN_SPACING` times
+    the median edge; the log line names ``nodes=``, which chooses the count.
+    """
+    if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 3 or not np.isfinite(pts).all():
+        return None  # make_shape says what is wrong
+    path = np.vstack([pts, pts[:1]]) if closed else pts
+    with np.errstate(over="ignore", invalid="ignore"):  # absurd sizes: Shape refuses them
+        edges = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    median = float(np.median(edges))
+    if not np.isfinite(edges).all() or median <= 0 or edges.max() <= UNEVEN_SPACING * median:
+        return None
+    nodes = max(DEFAULT_NODES, len(pts))
+    _log.info("%s: uneven spacing (longest edge %.3g times the median): resampled from %d "
+              "to %d nodes equally spaced by arc length (nodes=N for another count)",
+              name, edges.max() / median, len(pts), nodes)
+    return nodes
 
 
 @dataclass(frozen=True)

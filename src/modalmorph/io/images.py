@@ -105,6 +105,7 @@ def image_contour(grey: np.ndarray, name: str, threshold: float | None,
     from skimage.measure import find_contours
 
     chosen = _choose_object(_image_mask(grey, name, threshold), choice, name)
+    _say_holes(chosen, name)
     padded = np.pad(chosen, 1).astype(np.float64)  # closes contours at the image's edge
     contours = find_contours(padded, 0.5)
     best = contours[int(np.argmax([abs(area(c)) for c in contours]))]  # the outer
@@ -112,6 +113,20 @@ def image_contour(grey: np.ndarray, name: str, threshold: float | None,
     if area(pts) < 0:
         pts = pts[::-1]  # one orientation for every image: positive area in (x, y)
     return pts
+
+
+def _say_holes(chosen: np.ndarray, name: str) -> None:
+    """Warn (one line) when the object has holes of :data:`MIN_OBJECT_PIXELS` or more (a
+    ring, such as a myocardium): a shape is one contour, the outer one."""
+    from scipy import ndimage
+
+    holes, count = ndimage.label(ndimage.binary_fill_holes(chosen) & ~chosen)
+    sizes = np.bincount(holes.ravel())[1:]
+    big = int(np.count_nonzero(sizes >= MIN_OBJECT_PIXELS))
+    if big:
+        _log.warning("%s: the object has %d hole%s (%d px); only its outer boundary is "
+                     "used", name, big, "s" if big > 1 else "", int(sizes[sizes >=
+                                                                   MIN_OBJECT_PIXELS].sum()))
 
 
 def _choose_object(mask: np.ndarray, choice, name: str) -> np.ndarray:

@@ -50,9 +50,11 @@ class ItemResult:
     was stopped or its scheduler lost; ``error`` says which). ``note`` says why an item
     complete on disk was redone (its inputs or options changed, or ``--force``). The
     numbers come from the item's written results: ``steps`` (summed over a sequence's
-    morphs), ``converged`` (all of them), ``distance`` (the final mean distance of a
-    pair's matched nodes to their partners; a sequence's largest distance to a frame),
-    ``energy`` (final strain energy; a sequence's cumulative energy),
+    morphs), ``converged`` (all of them), ``distance`` and ``tolerance`` (a pair's stop
+    test: ``result.json``'s ``distance``, within ``tolerance`` when converged; empty for
+    a sequence), ``frame_distance`` (a sequence's largest two-way distance of the tracked
+    shape to a frame; empty for a pair), ``energy`` (final strain energy; a sequence's
+    cumulative energy),
     ``strain_min``/``strain_max`` (a sequence's global contour strain), ``seconds``
     (wall time of the item in its worker, when computed now).
     """
@@ -65,6 +67,8 @@ class ItemResult:
     steps: int | None = None
     converged: bool | None = None
     distance: float | None = None
+    tolerance: float | None = None
+    frame_distance: float | None = None
     energy: float | None = None
     strain_min: float | None = None
     strain_max: float | None = None
@@ -132,13 +136,14 @@ def read_row(item: Item, folder: Path, status: str, *, seconds: float | None = N
     data = json.loads((folder / RESULT_FILE[item.kind]).read_text(encoding="utf-8"))
     if item.kind == "pair":
         numbers = dict(steps=data["steps"], converged=data["converged"],
-                       distance=data["mean_distance"][-1], energy=data["energy"][-1])
+                       distance=data.get("distance"), tolerance=data.get("tolerance"),
+                       energy=data["energy"][-1])
     else:
         frames = data["frames"]
         strain = [f["strain"] for f in frames]
         numbers = dict(steps=sum(f["steps"] for f in frames),
                        converged=all(f["converged"] for f in frames),
-                       distance=max(f["distance"] for f in frames),
+                       frame_distance=max(f["distance"] for f in frames),
                        energy=frames[-1]["cumulative_energy"],
                        strain_min=min(strain), strain_max=max(strain))
     return ItemResult(id=item.id, kind=item.kind, inputs=item.inputs, status=status,

@@ -18,7 +18,8 @@ __all__ = ["COLUMNS", "write_summary", "read_summary"]
 
 COLUMNS = tuple(f.name for f in fields(ItemResult))
 _TYPES = {f.name: typing.get_type_hints(ItemResult)[f.name] for f in fields(ItemResult)}
-_FLOAT_COLUMNS = ("distance", "energy", "strain_min", "strain_max", "seconds")
+_FLOAT_COLUMNS = ("distance", "tolerance", "frame_distance", "energy", "strain_min",
+                  "strain_max", "seconds")
 
 
 def write_summary(results: Iterable[ItemResult], out, *, figure: bool = False) -> list[Path]:

@@ -26,10 +26,7 @@ from . import dense, multilevel, sparse
 __all__ = ["Solver", "SOLVERS", "AUTO_MULTILEVEL_MIN_NODES", "choose"]
 
 SOLVERS = ("auto", "dense", "sparse", "multilevel")
-# solver="auto" uses the dense solver up to AUTO_DENSE_MAX_DOF degrees of freedom, the
-# sparse one above, and for 3D shapes the multilevel solver from this many nodes on: the
-# sparse factor of a 3D point set (some 300 neighbours per node) needs about 1 GB at 2000
-# nodes and runs out of 8 GB at 3000.
+# 3D shapes from this many nodes use the multilevel solver (sparse: 1 GB at 2000; method.md §7).
 AUTO_MULTILEVEL_MIN_NODES = 2500
 
 

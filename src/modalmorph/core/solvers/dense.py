@@ -11,10 +11,7 @@ from ..modes import Modes
 
 __all__ = ["solve"]
 
-# Below this fraction of the spectrum, and from this size up, LAPACK's MRRR with an index
-# range (evr) beats the divide-and-conquer solver (evd), which always computes every
-# eigenvector (OPENBLAS_NUM_THREADS=1, 24 and 48 of 140-800: evd 1.5/3.0/8.9/24/87 ms at
-# 140/200/320/500/800, evr 24 modes 1.8/2.8/5.5/12/40 ms, evr 20 % 1.9/4.1/10/27/84 ms).
+# Below this fraction of the spectrum, from this size up, LAPACK evr beats evd (method.md §7).
 _SUBSET_FRACTION, _SUBSET_MIN = 0.15, 200
 
 

@@ -75,10 +75,7 @@ __all__ = ["solve", "Operators", "COARSE_NODES", "MULTILEVEL_CUTOFF", "MULTILEVE
 
 logger = logging.getLogger(__name__)
 
-# The multilevel solver's default cutoff: a radius of 8.1 sigma instead of 10.3, 190
-# neighbours per node of a 3D surface instead of 294; the lowest 60 frequencies of the
-# 2000-node benchmark ellipsoid move by 3e-6 relative (benchmarks/scale.py). 1e-4 leaves
-# Gamma indefinite there.
+# Multilevel cutoff: 8.1 sigma, 190 neighbours; frequencies move by 3e-6 (method.md §7).
 MULTILEVEL_CUTOFF = 1e-6
 
 # Nodes of the coarse model that gives the starting subspace: its 3 * 1000 degrees of
@@ -87,17 +84,9 @@ COARSE_NODES = 1000
 # Relative residual below which a mode counts as converged (see the module's docstring
 # for what it means for the frequencies, measured against the exact solvers).
 MULTILEVEL_TOL = 5e-2
-# LOBPCG iterations at most. Quasi-uniform nodes converge in a few (the benchmark blob:
-# 3 at 100k nodes), but on nodes drawn at random the lowest modes are localised where the
-# nodes happen to crowd (half their displacement energy on some 30 nodes, measured at
-# 3000 nodes of a random ellipsoid), hundreds of nearly equal frequencies, and the residual
-# falls by only ~0.9 per iteration: 35 iterations for 100k random points on an ellipsoid
-# (benchmarks/multilevel.py). The run stops earlier when it stalls (_STALL_WINDOW).
+# LOBPCG iterations at most (100k random ellipsoid points need 35; method.md §7).
 MULTILEVEL_MAXITER = 100
-# A run that has not lowered its largest wanted residual to _STALL_FACTOR times its best
-# value _STALL_WINDOW iterations before stops (and raises): measured on 100k random points,
-# the slowest steady phase lowers it by 0.78 over 10 iterations, while soft locking makes
-# it oscillate by +-15% from one iteration to the next.
+# Stalled: the residual fell by less than _STALL_FACTOR over this many iterations (method.md §7).
 _STALL_WINDOW = 10
 _STALL_FACTOR = 0.9
 # Nodes per preconditioner patch: dense (d * 32)^2 Cholesky factors, 9 * 32 doubles per
@@ -109,10 +98,12 @@ _PATCH_BATCH = 256
 _ROWS = 4096
 # Points per chunk of the coarse modes' fields at the fine nodes.
 _FIELD_CHUNK = 16384
-# Threads for the sparse products (scipy's release the GIL), and for the dense block
-# products when BLAS is single-threaded (see _blas_single_threaded); the benchmark machine
-# has 2 cores. The results do not depend on it beyond round-off.
+# Threads of the sparse and dense block products (2 cores; results equal to round-off).
 THREADS = 2
+
+
+# Fewest nodes of a model (a shape has at least 3): the coarse model's floor.
+_MIN_COARSE = 3
 
 
 def _guard(n: int) -> int:
@@ -188,6 +179,11 @@ def _coarse_start(model, n: int, coarse_nodes: int, order: np.ndarray,
     """The starting block (d*m, kc): the lowest ``kc`` modes (``n`` and the guard) of a
     model of the same object on at most ``coarse_nodes`` nodes, as displacement fields at
     the fine nodes (in the solver's node order)."""
+    if model.m // 2 < _MIN_COARSE:
+        raise ModelError(f"solver='multilevel' needs at least {2 * _MIN_COARSE} nodes (its "
+                         f"coarse model has half of them, and a model at least "
+                         f"{_MIN_COARSE}), this shape has {model.m}: use solver='dense' or "
+                         f"'sparse'")
     cmodel = model.coarsened(min(coarse_nodes, model.m // 2))
     k = min(n + _guard(n), model.dim * model.m // 2)
     kc = min(k, cmodel.dim * cmodel.m - 2)

@@ -81,13 +81,7 @@ def _negative_pivots(lu) -> int | None:
     return int(np.count_nonzero(lu.U.diagonal() < 0))
 
 
-# Shift-invert Lanczos converges fast only when the shift lies close below the lowest
-# eigenvalue: the low spectrum of the Gaussian element is a tight cluster (the lowest 50
-# frequencies of a 16000-node contour lie within 0.3%), and a shift at 0 maps it to nearly
-# equal values: 57 s against 2.7 s with a shift 1% below (measured on that contour).
-# Eight LOBPCG steps (block of 8, preconditioned by the factor at ~0) put the lowest Ritz
-# value within 0.02-1.1% above the lowest eigenvalue on contours of 1000-16000 nodes and
-# ellipsoids of 800-2000 (measured); the shift is placed 2% below it.
+# Shift-invert 2% below an 8-step LOBPCG estimate of the lowest eigenvalue (method.md §7).
 _SHIFT_MARGIN = 0.02
 _ESTIMATE_BLOCK, _ESTIMATE_STEPS = 8, 8
 

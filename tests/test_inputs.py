@@ -1,0 +1,165 @@
+"""What users see is what was computed (issue 21 B): conventions, inputs, output folders."""
+
+import logging
+import os
+import re
+import stat
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from modalmorph.apps.cli import flag_text
+from modalmorph.apps.runs import read_pair
+from modalmorph.io import DEFAULT_NODES, OUTPUT_MARKER, atomic_output_dir, read_shape, y_down
+from modalmorph.options import ReadOptions
+
+SRC = Path(__file__).resolve().parents[1] / "src"
+
+
+@pytest.mark.skipif(os.name != "posix", reason="umask is POSIX")
+@pytest.mark.parametrize("mask", [0o022, 0o077, 0o002])
+def test_output_folders_follow_the_umask(tmp_path, mask):
+    old = os.umask(mask)
+    try:
+        for final in (tmp_path / f"new{mask:o}", tmp_path / f"nested{mask:o}" / "out"):
+            for _ in range(2):  # created, then replaced
+                with atomic_output_dir(final) as tmp:
+                    (tmp / OUTPUT_MARKER).write_text("x")
+                assert stat.S_IMODE(final.stat().st_mode) == 0o777 & ~mask
+                plain = tmp_path / "plain"  # what mkdir gives, the reference
+                plain.mkdir()
+                assert stat.S_IMODE(final.stat().st_mode) == stat.S_IMODE(plain.stat().st_mode)
+                plain.rmdir()
+    finally:
+        os.umask(old)
+
+
+# ------------------------------------------------------------------ shapes from files
+
+def _glyph_p():
+    """A "P": a straight stem of 2 vertices and a bowl of many (uneven spacing); not
+    symmetric under y -> -y, so its mirror image is another shape."""
+    t = np.linspace(np.pi / 2, -np.pi / 2, 30)
+    bowl = np.c_[10 + 25 * np.cos(t), 55 + 25 * np.sin(t)]
+    return np.vstack([[[0.0, 0.0]], [[0.0, 80.0]], bowl, [[10.0, 30.0]], [[10.0, 0.0]]])
+
+
+def _write_csv(path, pts):
+    np.savetxt(path, pts, delimiter=",", header="x,y", comments="")
+    return path
+
+
+def _write_svg(path, pts, height=100.0):
+    """The same glyph in SVG: y down, so the y of its numbers is ``height - y``."""
+    d = "M " + " L ".join(f"{x},{height - y}" for x, y in pts) + " Z"
+    path.write_text(f'<svg xmlns="http://www.w3.org/2000/svg" width="100" height="{height}">'
+                    f'<path d="{d}"/></svg>')
+    return path
+
+
+def test_uneven_polygons_are_resampled_by_arc_length(tmp_path, caplog):
+    path = _write_csv(tmp_path / "p.csv", _glyph_p())
+    with caplog.at_level(logging.INFO, logger="modalmorph.io"):
+        shape = read_shape(path)
+    assert shape.m == DEFAULT_NODES
+    edges = np.linalg.norm(np.diff(np.vstack([shape.points, shape.points[:1]]), axis=0), axis=1)
+    assert edges.max() < 1.01 * np.median(edges)  # even (chords across corners: shorter)
+    assert "resampled from 34 to 200 nodes" in caplog.text and "nodes=N" in caplog.text
+    assert read_shape(path, nodes=60).m == 60  # nodes= chooses
+    circle = np.c_[np.cos(np.linspace(0, 6, 40)), np.sin(np.linspace(0, 6, 40))]
+    assert read_shape(_write_csv(tmp_path / "c.csv", circle)).m == 40  # even: kept
+
+
+def test_mixed_y_directions_warn_once_and_flip_y_mirrors(tmp_path):
+    csv = _write_csv(tmp_path / "p.csv", _glyph_p())
+    svg = _write_svg(tmp_path / "p.svg", _glyph_p())
+    with pytest.warns(UserWarning) as caught:
+        read_pair(csv, svg, ReadOptions())
+    assert len(caught) == 1
+    text = str(caught[0].message)
+    assert str(csv) in text and str(svg) in text and "flip_y=True" in text
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        source, target = read_pair(csv, svg, ReadOptions(flip_y=True))
+    assert y_down(source) and y_down(target)
+    # the mirrored CSV is the SVG's glyph moved by (0, -height)
+    assert_allclose(source.points, target.points - [0.0, 100.0], atol=1e-9)
+    plain = read_shape(csv)
+    assert not y_down(plain) and read_shape(csv, flip_y=True).points[0, 1] == \
+        -plain.points[0, 1]
+
+
+def test_ring_masks_say_only_the_outer_boundary_is_used(tmp_path, caplog):
+    from PIL import Image
+
+    yy, xx = np.mgrid[:120, :120]
+    r = np.hypot(xx - 60, yy - 60)
+    Image.fromarray(((r < 40) & (r > 20)).astype(np.uint8) * 255).save(tmp_path / "ring.png")
+    Image.fromarray((r < 40).astype(np.uint8) * 255).save(tmp_path / "disc.png")
+    with caplog.at_level(logging.WARNING, logger="modalmorph.io"):
+        read_shape(tmp_path / "disc.png")
+        assert not caplog.records
+        read_shape(tmp_path / "ring.png")
+    [record] = caplog.records
+    assert "1 hole" in record.getMessage() and "only its outer boundary" in record.getMessage()
+
+
+def test_library_figures_follow_the_shapes_frame(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+
+    from modalmorph import figures, morph
+    from modalmorph.datasets import heart_shape
+
+    heart = morph(heart_shape("diastole"), heart_shape("systole"), max_steps=1)
+    assert figures.plot_shapes(heart).yaxis_inverted()  # pixels, y down: as `demo`
+    bare = morph(heart.source.points, heart.target.points, max_steps=1)
+    assert not figures.plot_shapes(bare).yaxis_inverted()  # plain numbers: y up
+    plt.close("all")
+
+
+# ---------------------------------------------------------------------- command line
+
+def test_flag_text_names_flags():
+    assert flag_text("pass a threshold, e.g. threshold=102 (Otsu's)") == \
+        "pass a threshold, e.g. --threshold 102 (Otsu's)"
+    assert flag_text("stopped at max_steps=3, far") == "stopped at --max-steps 3, far"
+    assert flag_text("flip_y=True mirrors; remove_rigid=False.") == \
+        "--flip-y mirrors; --no-remove-rigid."
+    assert flag_text("x: threshold= applies") == "x: --threshold applies"
+    assert flag_text("Shape(points, closed=False)") == "Shape(points, closed=False)"
+
+
+def _cli(*args):
+    env = {**os.environ, "PYTHONPATH": str(SRC)}
+    return subprocess.run([sys.executable, "-m", "modalmorph", *map(str, args)],
+                          capture_output=True, text=True, env=env, timeout=120)
+
+
+def test_command_line_says_resampling_mixing_and_flags(tmp_path):
+    csv = _write_csv(tmp_path / "p.csv", _glyph_p())
+    svg = _write_svg(tmp_path / "p.svg", _glyph_p())
+    run = _cli("morph", csv, svg, "--out", tmp_path / "out", "--no-figures", "--no-gif")
+    assert run.returncode in (0, 3), run.stderr
+    lines = run.stderr.splitlines()
+    assert any("p.csv: uneven spacing" in x and "--nodes N" in x for x in lines), lines
+    mixed = [x for x in lines if "y pointing up" in x]
+    assert len(mixed) == 1 and "--flip-y" in mixed[0] and "flip_y" not in mixed[0]
+
+    from PIL import Image
+
+    yy, xx = np.mgrid[:80, :100]
+    grey = (40 + 150 * (np.hypot(xx - 50, yy - 40) < 25) + (xx % 7)).astype(np.uint8)
+    Image.fromarray(grey).save(tmp_path / "grey.png")
+    run = _cli("morph", tmp_path / "grey.png", tmp_path / "grey.png", "--out", tmp_path / "o2")
+    assert run.returncode == 2
+    assert re.search(r"--threshold \d", run.stderr) and "threshold=" not in run.stderr
+    helped = _cli("morph", "--help").stdout
+    assert "Otsu" in helped and "default: Otsu" not in " ".join(helped.split())
