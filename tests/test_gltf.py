@@ -165,3 +165,19 @@ def test_morph_files_writes_gltf_and_meshes(tmp_path):
     doc, _ = read_glb(tmp_path / "out" / "morph.glb")
     assert run.result.steps > 0
     assert len(doc["meshes"][0]["primitives"][0]["targets"]) == run.result.steps
+
+
+@pytest.mark.parametrize("output", [OutputOptions(gltf=True), OutputOptions(meshes="obj")])
+def test_track_refuses_gltf_and_meshes(tmp_path, output):
+    from modalmorph.apps.runs import track_files
+    from modalmorph.errors import OptionError
+
+    with pytest.raises(OptionError, match="track writes no VTK, glTF, per-step meshes"):
+        track_files(tmp_path / "frames", tmp_path / "out", Settings(output=output))
+
+
+def test_meshes_option_is_checked():
+    from modalmorph.errors import OptionError
+
+    with pytest.raises(OptionError, match="meshes must be one of none, ply, obj, got 'stl'"):
+        OutputOptions(meshes="stl")
