@@ -131,17 +131,18 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
         raise ShapeError(f"source and target must have the same dimension, got "
                          f"{src.dim}D and {tgt.dim}D")
     options, match_options = _options(options, matching, overrides)
-    if not (matching is None or isinstance(matching, MatchOptions)):  # match() checks
+    given = not (matching is None or isinstance(matching, MatchOptions))
+    if isinstance(matching, Matching):
+        matching, match_options = matching.check(src.m, tgt.m), matching.options
+    elif given:
+        matching, match_options = Matching.given(matching, src.m, tgt.m), None
+    if given:  # match() checks the contours of what it matches
         for name, shape in (("source", src), ("target", tgt)):
             if shape.dim == 2 and shape.ordered:
                 check_simple(shape.points, name, shape.closed)
     with limit(max(src.m, tgt.m)):
-        if matching is None or isinstance(matching, MatchOptions):
+        if not given:
             matching = match(src, tgt, options=match_options)
-        elif isinstance(matching, Matching):
-            matching, match_options = matching.check(src.m, tgt.m), matching.options
-        else:
-            matching, match_options = Matching.given(matching, src.m, tgt.m), None
         pairs = matching.pairs
         similarity, work = None, src
         if options.remove_rigid:  # section 5.2: Horn's similarity from the matched pairs

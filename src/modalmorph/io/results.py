@@ -68,7 +68,9 @@ def save_result(morph, out_dir, *, options: dict | None = None,
 
 
 def result_summary(morph, *, options: dict | None = None, inputs: list | None = None) -> dict:
-    """The content of ``result.json``::
+    """The content of ``result.json``.
+
+    Its fields::
 
         {
           "modalmorph_version": str,      # the library that wrote it
