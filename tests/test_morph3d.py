@@ -68,8 +68,9 @@ def test_coarse_mesh_onto_a_finer_one_converges():
     src, tgt = mm.Shape(a, faces=fa), mm.Shape(turn.apply(b * [1.3, 1.0, 0.8]), faces=fb)
     r = mm.morph(src, tgt)
     assert r.converged, r.message
-    assert len(r.self_intersections) == r.steps + 1  # checked at every step, when it can be
-    assert not np.any(r.self_intersections)
+    if r.self_intersections is not None:  # None without pymeshlab
+        assert len(r.self_intersections) == r.steps + 1  # checked at every step
+        assert not np.any(r.self_intersections)
 
 
 def test_surface_stop_knows_the_source_resolution():
