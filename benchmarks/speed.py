@@ -17,9 +17,9 @@ held the cores, the CPU time does not). A row per family and size: pairs, median
 percentile and worst. ``--reference K`` also times the dense transcription of the paper
 (``morph.py``: G inverted, ``eigh(K, M)``, the affinity (8), the same Newmark steps) on
 the first K pairs of each family at each size, and prints the speed-up (reference /
-match + morph, CPU seconds, median and worst over those pairs). ``--track`` times
-``modalmorph.track`` (default options) on the 20 contours of SC-HF-NI-03 resampled to 250
-nodes. The load average is printed first and last.
+match + morph, CPU seconds, both on one BLAS thread; median and worst over those
+pairs). ``--track`` times ``modalmorph.track`` (default options) on the 20 contours of
+SC-HF-NI-03 resampled to 250 nodes. The load average is printed first and last.
 
     PYTHONPATH=src python benchmarks/speed.py [--sizes 70 250 1000] [--repeat 3]
         [--reference 3] [--track]
@@ -35,6 +35,7 @@ import time
 import numpy as np
 from morph import reference, reference_match
 from realdata import DATA, glyph_outline, heart_pairs
+from threadpoolctl import threadpool_limits
 
 import modalmorph as mm
 from modalmorph.core.shape import resample
@@ -81,11 +82,14 @@ def match_morph(a, b):
 
 
 def dense_reference(a, b, pairs, steps) -> float:
-    """CPU seconds of the dense transcription (match, then morph with the same steps)."""
-    c = time.process_time()
-    reference_match(a, b)
-    reference(a, b, pairs, steps)
-    return time.process_time() - c
+    """CPU seconds of the dense transcription (match, then morph with the same steps), on
+    one BLAS thread like the library's calls up to 1000 nodes (more threads spin and
+    count CPU time without doing more work)."""
+    with threadpool_limits(1):
+        c = time.process_time()
+        reference_match(a, b)
+        reference(a, b, pairs, steps)
+        return time.process_time() - c
 
 
 def distribution(values) -> str:
