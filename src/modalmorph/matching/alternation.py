@@ -18,7 +18,7 @@ import numpy as np
 from ..core.align import Similarity, align
 from .features import Problem
 from .pose import Pose
-from .search import REPEAT, Costs, objective, trusted_pairs
+from .search import REPEAT, Costs, pairs_at, total, trusted_pairs
 
 __all__ = ["Fit", "Placement", "fits", "alternate", "keep_or_turn"]
 
@@ -45,10 +45,13 @@ class Fit:
 
 @dataclass(frozen=True, eq=False)
 class Placement:
-    """A similarity and where it, with a deformation, takes every source node (m, d)."""
+    """A similarity and where it, with a deformation, takes every source node (m, d);
+    ``found``, when already run, the final search there (pairs and cost matrix,
+    :func:`~modalmorph.matching.search.pairs_at` on every node)."""
 
     sim: Similarity
     z: np.ndarray
+    found: tuple | None = None
 
 
 def _tangents(y: np.ndarray, closed: bool, k: int = 2) -> np.ndarray:
@@ -144,5 +147,8 @@ def keep_or_turn(fit: Fit, final: Costs, placed: Placement, turned: Similarity
     alternation from the turned pose replaces ``placed`` only if it lowers the objective
     below ``_TURN_GAIN`` of its own (a shape turned by 5-45 degrees)."""
     free = alternate(fit, turned, True)
-    gain = objective(final, free.z) < _TURN_GAIN * objective(final, placed.z)
-    return free if gain else placed
+    everyone = np.arange(len(placed.z))
+    free = replace(free, found=pairs_at(final, free.z, everyone))
+    placed = replace(placed, found=pairs_at(final, placed.z, everyone))
+    gain = total(free.found, len(free.z)) < _TURN_GAIN * total(placed.found, len(placed.z))
+    return free if gain else placed  # with its final search, which settle() reuses

@@ -102,7 +102,7 @@ def settle(fit: Fit, final: Costs, placed: Placement, ordered: bool):
     field that fits the pair worse: serifs, fingers spread differently; the limit's
     measurement is in method.md §2)."""
     everyone = np.arange(len(placed.z))
-    found = pairs_at(final, placed.z, everyone)
+    found = pairs_at(final, placed.z, everyone) if placed.found is None else placed.found
     if not ordered or min(len(final.x), len(final.y)) < _COHERENT_NODES:
         return placed.z, found
     step = drift(fit, placed, found[0]) - placed.z

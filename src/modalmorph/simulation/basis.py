@@ -117,6 +117,12 @@ class Field:
         gtg = (self.g.T @ self.g).tocsr()
         return sum(b.T @ (gtg @ b) for b in self.B)
 
+    def sq_norm(self) -> float:
+        """The sum of the squares of ``Phi``, the trace of ``Phi^T Phi``."""
+        if self.g is None:
+            return float(sum(np.vdot(b, b) for b in self.B))
+        return float(np.trace(self.gram()))
+
     def dense(self) -> np.ndarray:
         """``Phi`` itself, (d*m, n)."""
         return np.concatenate([b if self.g is None else self.g @ b for b in self.B])

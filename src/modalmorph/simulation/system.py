@@ -124,8 +124,9 @@ class ModalSystem:
         kappa, spring = springs(field, k_abs, consistent=o.loads == "consistent"
                                 and spread is None)
         K_mod = stiffness + (spring if o.scheme == "implicit" else 0.0)
-        newmark = Newmark(K_mod, damping_matrix(o.damping, K_mod, spring), o.dt / w_ref,
-                          o.alpha, o.delta)
+        uniform = kappa is not None and o.scheme == "implicit"  # K_mod = K_el + kappa I
+        newmark = Newmark(K_mod, damping_matrix(o.damping, K_mod, spring, uniform=uniform),
+                          o.dt / w_ref, o.alpha, o.delta)
         return cls(source=source, target=target, pairs=pairs, options=o, reduced=reduced,
                    model=model, n_modes=n_modes, modes=modes, mass_modes=mass_modes,
                    field=field, spread=spread, k_ref=k_ref, k_abs=k_abs, source_n=X1,
@@ -210,15 +211,17 @@ def similarity_free(frequencies: np.ndarray, B: np.ndarray) -> np.ndarray:
 def springs(field: Field, k_abs: float, *, consistent: bool):
     """The springs (19) in modal coordinates, ``(kappa, spring matrix)``: nodal,
     ``Phi^T R = k Phi^T (T - X)`` (kappa None); consistent, ``kappa x_T`` with ``x_T``
-    the modes' fit of ``T - X`` and ``kappa`` their mean stiffness."""
-    PtP = field.gram()
+    the modes' fit of ``T - X`` and ``kappa`` their mean stiffness (the trace of
+    ``Phi^T Phi`` is the sum of the squares of ``Phi``: the product itself is not formed)."""
     if consistent:  # x_T = Phi^T M (T - X)
-        kappa = k_abs * np.trace(PtP) / len(PtP)
-        return kappa, kappa * np.eye(len(PtP))
-    return None, k_abs * PtP
+        n = field.B.shape[2]
+        kappa = k_abs * field.sq_norm() / n
+        return kappa, kappa * np.eye(n)
+    return None, k_abs * field.gram()
 
 
-def damping_matrix(damping, K_mod: np.ndarray, spring: np.ndarray) -> np.ndarray:
+def damping_matrix(damping, K_mod: np.ndarray, spring: np.ndarray, *,
+                   uniform: bool = False) -> np.ndarray:
     """``C_mod = a I + b K_mod`` (5) on the loaded model, by one of the two rules.
 
     ``damping=(xi_1, xi_2)``: the paper's, the ratios at the loaded model's lowest and
@@ -227,15 +230,21 @@ def damping_matrix(damping, K_mod: np.ndarray, spring: np.ndarray) -> np.ndarray
     ``w >= w_s`` has the ratio ``xi w / w_s``: overdamped modes then creep towards the
     target at nearly one rate (``~1 / b``), and the shape moves along nearly straight
     paths, with no mode racing ahead (ripples, folds); ``a`` lifts the softest loaded
-    mode to ``xi`` when it lies below ``w_s`` (method.md §4).
+    mode to ``xi`` when it lies below ``w_s`` (method.md §4). ``uniform``: ``K_mod`` is a
+    positive semi-definite elastic stiffness plus ``spring = w_s^2 I`` (consistent springs
+    in the effective stiffness), so no loaded mode lies below ``w_s``, ``a`` is 0 and the
+    lowest frequency is not computed (it gave ``a`` of the order of its rounding).
     """
     n = len(K_mod)
-    w_lo, w_hi = frequency_range(K_mod, highest=np.ndim(damping) > 0)
     if np.ndim(damping) == 0:  # every mode approaches at nearly the springs' one rate
         xi, w_s = float(damping), np.sqrt(np.trace(spring) / n)
         b = 2 * xi / w_s
+        if uniform:  # K_mod = K_el + w_s^2 I, K_el >= 0: w_lo >= w_s, so a = 0
+            return b * K_mod
+        w_lo, _ = frequency_range(K_mod, highest=False)
         a = max(0.0, 2 * w_lo * (xi - b * w_lo / 2))
-    else:  # (5) through two ratios, as the paper
+    else:
+        w_lo, w_hi = frequency_range(K_mod)  # (5) through two ratios, as the paper
         a, b = rayleigh(*damping, w_lo, w_hi)
     return a * np.eye(n) + b * K_mod
 
