@@ -44,7 +44,7 @@ source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 root_doc = "index"
 templates_path = ["_templates"]
 # docs/app, docs/demo, docs/track, docs/issue10 hold the README's pictures, not pages
-exclude_patterns = ["_build", "app", "demo", "track", "issue10",
+exclude_patterns = ["_build", "app", "demo", "track", "issue10", "issue25",
                     "auto_examples/*.ipynb", "auto_examples/*.py", "auto_examples/*.zip",
                     "auto_examples/*.md5", "auto_examples/*.codeobj.json"]
 
