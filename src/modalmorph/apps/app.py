@@ -63,9 +63,10 @@ def make_server(host: str = "127.0.0.1", port: int = 8765, *,
     return AppServer(host, port, limits)
 
 
-def serve(host: str = "127.0.0.1", port: int = 8765, *, open_browser: bool = False) -> None:
+def serve(host: str = "127.0.0.1", port: int = 8765, *, open_browser: bool = False
+          ) -> int | None:
     """Serve the app until Ctrl-C, SIGTERM or SIGHUP; then cancel the runs and remove
-    the temporary folder."""
+    the temporary folder. Returns the signal that stopped it."""
     server = make_server(host, port)
     if not ipaddress.ip_address(server.server_address[0]).is_loopback:
         log.warning("the app is reachable from other machines at %s: it has no login",
@@ -80,3 +81,4 @@ def serve(host: str = "127.0.0.1", port: int = 8765, *, open_browser: bool = Fal
     finally:
         server.server_close()
         log.info("modalmorph app stopped")
+    return server.stopped_by

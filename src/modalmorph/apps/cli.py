@@ -14,6 +14,7 @@ import argparse
 import contextlib
 import logging
 import re
+import signal
 import sys
 import time
 import warnings
@@ -398,8 +399,8 @@ def _run_track(args) -> int:
 
 
 def _run_app(args) -> int:
-    serve(args.host, args.port, open_browser=args.open)
-    return EXIT_OK
+    stopped_by = serve(args.host, args.port, open_browser=args.open)
+    return EXIT_INTERRUPTED if stopped_by == signal.SIGINT else EXIT_OK
 
 
 def _run_batch(args) -> int:

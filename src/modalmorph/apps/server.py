@@ -84,9 +84,12 @@ class _Uvicorn(uvicorn.Server):
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
 
+    stopped_by: int | None = None  # the signal that stopped it
+
     def _stop(self, sig, frame) -> None:
         self.force_exit = self.should_exit  # a second signal: do not wait for connections
         self.should_exit = True
+        self.stopped_by = sig
 
 
 class AppServer:
@@ -131,6 +134,11 @@ class AppServer:
             self._server.run(sockets=[self.socket])
         finally:
             self._done.set()
+
+    @property
+    def stopped_by(self) -> int | None:
+        """The signal that stopped :meth:`serve_forever` (None: :meth:`shutdown`)."""
+        return self._server.stopped_by
 
     def shutdown(self, timeout: float = 30.0) -> None:
         """Stop serving and wait (at most ``timeout`` s) for :meth:`serve_forever`."""
