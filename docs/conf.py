@@ -68,9 +68,7 @@ sphinx_gallery_conf = {
     "examples_dirs": "../examples",
     "gallery_dirs": "auto_examples",
     "filename_pattern": r"/plot_",
-    # heart_energy.py is a command-line script (it saves a PNG); the gallery's
-    # plot_heart_energy.py shows the same experiment
-    "ignore_pattern": r"^(heart_energy|__init__)\.py$",
+    "ignore_pattern": r"^__init__\.py$",
     "within_subsection_order": "FileNameSortKey",
     "download_all_examples": False,
     "remove_config_comments": True,
