@@ -154,6 +154,7 @@ def result_payload(result, *, title: str | None = None, images: dict | None = No
     frame = getattr(last, "frame", None)  # shapes from images (and SVG) are drawn y down
     source = _points(first)
     payload.update(y_up=frame is None or not frame.y_down,
+                   unit="input units" if frame is None else frame.unit,
                    source=source, target=_points(last),
                    source_closed=bool(getattr(first, "closed", True)),
                    target_closed=bool(getattr(last, "closed", True)),
