@@ -233,7 +233,7 @@ def finish_axes(ax, points: np.ndarray, view: View = View(), *, image: bool = Fa
         ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), zlim=(lo[2], hi[2]), **labels)
         ax.set_box_aspect(np.maximum(hi - lo, 1e-12))
         return
-    ax.set_aspect("equal", adjustable="datalim")  # kept by a layout engine's resizing
+    ax.set_aspect("equal", adjustable="box")  # a layout engine resizes the box, not the limits
     # the box the aspect is applied to (an image's own aspect may have shrunk the active one)
     box = ax.get_position(original=True).transformed(ax.figure.transFigure)
     lo, hi = fit_aspect(lo, hi, box.height / box.width)
