@@ -165,8 +165,7 @@ def input_records(inputs) -> list[dict]:
 
 def read_pair(source_path, target_path, read: ReadOptions):
     """The two shapes of a pair, read with the same options."""
-    kw = _read_kwargs(read)
-    source, target = read_shape(source_path, **kw), read_shape(target_path, **kw)
+    source, target = read_shape(source_path, read), read_shape(target_path, read)
     if source.dim != target.dim:
         raise ShapeError(f"{source_path} is {source.dim}D but {target_path} is "
                          f"{target.dim}D: both shapes must have the same dimension")
@@ -186,11 +185,6 @@ def check_y_directions(names, shapes) -> None:
                       f"pointing down (image coordinates): the same outline in the two is "
                       f"mirrored; flip_y=True mirrors the point files' y to match",
                       stacklevel=2)
-
-
-def _read_kwargs(read: ReadOptions) -> dict:
-    return dict(nodes=read.nodes, threshold=read.threshold, object=read.object,
-                flip_y=read.flip_y)
 
 
 def compute_morph(source, target, settings: Settings, *, progress=None):
@@ -262,7 +256,7 @@ def track_files(inputs, out, settings: Settings | None = None, *, progress=None)
     check_tools(output)
     out = Path(out)
     with atomic_output_dir(out) as tmp:
-        frames = read_frames(inputs, **_read_kwargs(settings.read))
+        frames = read_frames(inputs, settings.read)
         check_y_directions(frames.names, frames.shapes)
         with limit(max(shape.m for shape in frames.shapes)):
             result = track(frames.shapes, names=frames.names, options=seq,
