@@ -15,8 +15,8 @@ from ..errors import ShapeError
 from .align import align
 from .shape import resample
 
-__all__ = ["Polyline", "area", "correspondence_rotation", "curve_distances", "roughness",
-           "self_crossings", "crossing_segments", "LOOP_AREA",
+__all__ = ["Polyline", "area", "check_contours", "correspondence_rotation",
+           "curve_distances", "roughness", "self_crossings", "crossing_segments", "LOOP_AREA",
            "check_simple"]
 
 # Vertices whose segments curve_distances tests first (4: 2.5x faster than 8; method.md §5).
@@ -199,15 +199,19 @@ def self_crossings(points, closed: bool = True) -> int:
     return len(crossing_segments(points, closed))
 
 
-def crossing_segments(points, closed: bool = True) -> np.ndarray:
-    """The pairs of non-adjacent segments of a 2D polyline that properly cross, (c, 2) of
-    int, each row ``(i, j)`` with ``i < j`` for the segments from node ``i`` to ``i + 1``
-    and from ``j`` to ``j + 1`` (modulo ``m`` when closed); see :func:`self_crossings`."""
+def crossing_segments(points, closed: bool = True, *, edges=None) -> np.ndarray:
+    """The pairs of segments of a 2D polyline that properly cross, (c, 2) of int, each row
+    ``(i, j)`` with ``i < j`` for the segments from node ``i`` to ``i + 1`` and from ``j``
+    to ``j + 1`` (modulo ``m`` when closed); see :func:`self_crossings`. With ``edges``
+    (e, 2) (a :attr:`Shape.edges` of several contours), the segments are those rows and
+    ``i``, ``j`` index them; segments sharing a node never count as crossing."""
     p = _points(points, "points", dims=(2,))
     m = len(p)
-    n_seg = m if closed else m - 1
-    a = p[:n_seg]
-    b = np.roll(p, -1, axis=0)[:n_seg]
+    if edges is None:
+        i = np.arange(m if closed else m - 1)
+        edges = np.c_[i, (i + 1) % m]
+    edges = np.asarray(edges, dtype=np.intp)
+    a, b = p[edges[:, 0]], p[edges[:, 1]]
     lo_x, hi_x = np.minimum(a[:, 0], b[:, 0]), np.maximum(a[:, 0], b[:, 0])
     lo_y, hi_y = np.minimum(a[:, 1], b[:, 1]), np.maximum(a[:, 1], b[:, 1])
 
@@ -217,10 +221,9 @@ def crossing_segments(points, closed: bool = True) -> np.ndarray:
 
     found = []
     for i, j in _candidate_pairs(lo_x, hi_x):
-        gap = np.abs(i - j)
-        keep = (gap > 1) & (lo_y[i] <= hi_y[j]) & (lo_y[j] <= hi_y[i])
-        if closed:
-            keep &= gap != n_seg - 1  # the closing segment touches the first one
+        shared = ((edges[i, 0] == edges[j, 0]) | (edges[i, 0] == edges[j, 1])
+                  | (edges[i, 1] == edges[j, 0]) | (edges[i, 1] == edges[j, 1]))
+        keep = (i != j) & ~shared & (lo_y[i] <= hi_y[j]) & (lo_y[j] <= hi_y[i])
         i, j = i[keep], j[keep]
         cross = ((orient(a[i], b[i], a[j]) * orient(a[i], b[i], b[j]) < 0)
                  & (orient(a[j], b[j], a[i]) * orient(a[j], b[j], b[i]) < 0))
@@ -254,6 +257,24 @@ def check_simple(points, name: str, closed: bool = True) -> None:
                 f"{name} crosses itself: the segment from node {i} to {(i + 1) % m} crosses "
                 f"the one from node {j} to {(j + 1) % m} at ({x[0]:.4g}, {x[1]:.4g}); a "
                 "contour must be one simple closed curve (a figure eight or a star is not)")
+
+
+def check_contours(shape, name: str) -> None:
+    """:func:`check_simple` on every contour of a 2D ordered :class:`Shape`, and no
+    contour crossing another (a ring's hole must stay inside it): ShapeError naming the
+    two contours and where they cross."""
+    if len(shape.sizes) == 1:
+        check_simple(shape.points, name, shape.closed)
+        return
+    for k, rows in enumerate(shape.slices):
+        check_simple(shape.points[rows], f"{name} contour {k}", shape.closed)
+    edges, part = shape.edges, shape.contour_of[shape.edges[:, 0]]
+    for i, j in crossing_segments(shape.points, edges=edges):
+        if part[i] != part[j]:
+            x = shape.points[edges[i, 0]]
+            raise ShapeError(f"{name}: contour {part[i]} crosses contour {part[j]} near "
+                             f"({x[0]:.4g}, {x[1]:.4g}); contours of one shape must not "
+                             "cross (a hole lies inside its outer boundary)")
 
 
 def roughness(points, closed: bool = True) -> float:

@@ -11,7 +11,7 @@ from scipy.spatial import cKDTree
 from ..errors import ShapeError
 
 __all__ = ["ImageFrame", "Shape", "as_shape", "check_pairs", "coarsen", "even_subset",
-           "resample", "spread_indices", "GRID_ROUNDS", "HUGE", "FPS_POOL"]
+           "resample", "share", "spread_indices", "GRID_ROUNDS", "HUGE", "FPS_POOL"]
 
 # Two nodes closer than this fraction of the object's RMS radius are "the same node".
 _REPEAT_TOL = 1e-9
@@ -73,13 +73,19 @@ class Shape:
         For shapes in image coordinates (read from an image or SVG): their unit,
         orientation (y down) and source image, used by the figures. None: plain
         coordinates in the input's units, y up.
+    contours : sequence of int, optional
+        For ordered shapes of several contours (a myocardium ring: its outer boundary and
+        its hole; a footprint: heel, forefoot and toes): the node count of each contour,
+        in row order, summing to ``m``; every contour is closed (or open) as ``closed``
+        says. ``None``: one contour (stored so; ``(m,)`` is the same).
 
     Raises
     ------
     ShapeError
         If the points are not finite, not of shape (m, 2) or (m, 3), fewer than 3, contain
-        repeated nodes, or all lie (nearly) at one point; or if ``closed`` or ``ordered``
-        is not a boolean.
+        repeated nodes, or all lie (nearly) at one point; if ``closed`` or ``ordered``
+        is not a boolean; or if ``contours`` do not split the nodes into contours of at
+        least 3 nodes (2 for open ones) of an ordered shape without faces.
     """
 
     points: np.ndarray
@@ -87,6 +93,7 @@ class Shape:
     ordered: bool | None = None
     faces: np.ndarray | None = field(default=None)
     frame: ImageFrame | None = None
+    contours: tuple[int, ...] | None = None
 
     def __post_init__(self):
         for name in ("closed", "ordered"):  # "no" is a true string: refuse it by name
@@ -112,6 +119,24 @@ class Shape:
             object.__setattr__(self, "faces", faces)
         if self.frame is not None and not isinstance(self.frame, ImageFrame):
             raise ShapeError(f"frame must be an ImageFrame or None, got {self.frame!r}")
+        object.__setattr__(self, "contours", self._checked_contours())
+
+    def _checked_contours(self) -> tuple[int, ...] | None:
+        """``contours`` as a tuple of ints, None for one contour; ShapeError if invalid."""
+        if self.contours is None:
+            return None
+        sizes = np.asarray(self.contours)
+        if sizes.ndim != 1 or not len(sizes) or not np.issubdtype(sizes.dtype, np.integer):
+            raise ShapeError(f"contours must be a sequence of node counts, got "
+                             f"{self.contours!r}")
+        if not self.ordered or self.faces is not None:
+            raise ShapeError("contours split an ordered shape (contours or polylines); "
+                             "a point set or a surface has none")
+        least = 3 if self.closed else 2
+        if sizes.min() < least or int(sizes.sum()) != self.m:
+            raise ShapeError(f"contours must be node counts of at least {least} summing to "
+                             f"the {self.m} nodes, got {sizes.tolist()}")
+        return None if len(sizes) == 1 else tuple(int(k) for k in sizes)
 
     @property
     def m(self) -> int:
@@ -158,16 +183,73 @@ class Shape:
         """Map points in the user's coordinates into this shape's normalised frame."""
         return (np.asarray(points, dtype=np.float64) - self.centroid) / self.size
 
+    @property
+    def sizes(self) -> tuple[int, ...]:
+        """Node count of each contour of an ordered shape (``(m,)`` for one contour);
+        ``()`` for point sets and surfaces."""
+        if not self.ordered or self.faces is not None:
+            return ()
+        return self.contours or (self.m,)
+
+    @property
+    def slices(self) -> list[slice]:
+        """The rows of each contour (see :attr:`sizes`)."""
+        ends = np.cumsum(self.sizes, dtype=np.intp)
+        return [slice(int(e - k), int(e)) for k, e in zip(self.sizes, ends, strict=True)]
+
+    @cached_property
+    def contour_of(self) -> np.ndarray:
+        """The contour of every node, shape (m,) (all 0 for one contour or no contour)."""
+        out = np.repeat(np.arange(len(self.sizes)), self.sizes) if self.sizes else \
+            np.zeros(self.m, dtype=np.intp)
+        out.setflags(write=False)
+        return out
+
+    @cached_property
+    def edges(self) -> np.ndarray:
+        """Node pairs (e, 2) joined by the shape's topology: each contour's segments (the
+        last node back to the first when closed), a surface's triangle edges (unique,
+        sorted), none for a point set."""
+        if self.faces is not None:
+            e = np.sort(self.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+            out = np.unique(e, axis=0) if len(e) else np.empty((0, 2), dtype=np.intp)
+        elif self.ordered:
+            parts = [_contour_edges(s.start, s.stop, self.closed) for s in self.slices]
+            out = np.vstack(parts)
+        else:
+            out = np.empty((0, 2), dtype=np.intp)
+        out = out.astype(np.intp)
+        out.setflags(write=False)
+        return out
+
+    def contour(self, k: int) -> Shape:
+        """Contour ``k`` alone, as a shape of one contour (same ``closed`` and frame)."""
+        return Shape(self.points[self.slices[k]], closed=self.closed, ordered=True,
+                     frame=self.frame)
+
     def __repr__(self) -> str:
         kind = ("surface" if self.faces is not None else "closed contour" if self.ordered
                 and self.closed else "open curve" if self.ordered else "point set")
+        if self.contours:
+            kind = f"{kind.replace('contour', 'contours').replace('curve', 'curves')} " \
+                   f"x{len(self.contours)}"
         frame = "" if self.frame is None else f", in {self.frame.unit}"
         return f"Shape({self.m} nodes, {self.dim}D {kind}{frame})"
 
     def with_points(self, points: np.ndarray) -> Shape:
-        """The same topology (closed, ordered, faces) and frame on other node coordinates."""
+        """The same topology (closed, ordered, faces, contours) and frame on other node
+        coordinates."""
         return Shape(points, closed=self.closed, ordered=self.ordered, faces=self.faces,
-                     frame=self.frame)
+                     frame=self.frame, contours=self.contours)
+
+
+def _contour_edges(start: int, stop: int, closed: bool) -> np.ndarray:
+    """Segments of the contour on rows ``start:stop``, closing back when ``closed``."""
+    i = np.arange(start, stop if closed else stop - 1)
+    j = i + 1
+    if closed:
+        j[-1] = start
+    return np.c_[i, j]
 
 
 def _validate_points(points, name: str) -> np.ndarray:
@@ -251,7 +333,11 @@ def spread_indices(shape: Shape, n: int) -> np.ndarray:
     if m <= n:
         return np.arange(m)
     if shape.ordered:
-        return np.unique(np.linspace(0, m, n, endpoint=not shape.closed).astype(np.intp) % m)
+        counts = share(shape, n)
+        return np.concatenate([
+            r.start + np.unique(np.linspace(0, k, c, endpoint=not shape.closed)
+                                .astype(np.intp) % k)
+            for r, k, c in zip(shape.slices, shape.sizes, counts, strict=True)])
     x = shape.normalized
     pool = None
     if m > HUGE and m > FPS_POOL * n:  # linear cost, not m n: among an even subset
@@ -308,8 +394,37 @@ def coarsen(shape: Shape, n: int) -> Shape:
     if shape.m <= n:
         return shape
     if shape.ordered:
-        return Shape(resample(shape.points, n, closed=shape.closed), closed=shape.closed)
+        counts = share(shape, n)
+        pts = [resample(shape.points[r], c, closed=shape.closed)
+               for r, c in zip(shape.slices, counts, strict=True)]
+        return Shape(np.vstack(pts), closed=shape.closed,
+                     contours=tuple(counts) if shape.contours else None)
     return Shape(shape.points[spread_indices(shape, n)], ordered=False)
+
+
+def share(shape: Shape, n: int) -> list[int]:
+    """``n`` nodes shared among the contours of an ordered shape in proportion to their
+    lengths (largest remainders), each keeping at least 3 (2 when open) and at most its
+    own node count; one contour gets ``min(n, m)``."""
+    sizes = np.asarray(shape.sizes)
+    if len(sizes) == 1:
+        return [min(n, shape.m)]
+    least = 3 if shape.closed else 2
+    length = np.array([_length(shape.points[r], shape.closed) for r in shape.slices])
+    free = max(n - least * len(sizes), 0)
+    want = least + free * length / length.sum()
+    counts = np.minimum(np.floor(want).astype(int), sizes)
+    for k in np.argsort(counts - want):  # largest remainders first
+        if counts.sum() >= min(n, shape.m):
+            break
+        if counts[k] < sizes[k]:
+            counts[k] += 1
+    return counts.tolist()
+
+
+def _length(points: np.ndarray, closed: bool) -> float:
+    path = np.vstack([points, points[:1]]) if closed else points
+    return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
 
 
 def check_pairs(pairs, m: int, n: int) -> np.ndarray:
