@@ -9,7 +9,7 @@ extensions                             content                             modul
 ``.npy`` ``.npz``                      an (m, d) array                     :mod:`.points`
 ``.json``                              ``[[x, y], ...]`` or an object      :mod:`.points`
 ``.svg``                               the first path, polygon, etc.       :mod:`.svg`
-``.png`` ``.tif`` ``.tiff`` ``.jpg``   one object's outer contour          :mod:`.images`
+``.png`` ``.tif`` ``.tiff`` ``.jpg``   one object's contours (and holes)   :mod:`.images`
 ``.jpeg`` ``.bmp``
 ``.ply`` ``.obj`` ``.stl`` ``.off``    a triangle surface or point cloud   :mod:`.meshes`
 ``.vtk`` ``.vtu`` ``.msh`` ``.mesh``
@@ -73,7 +73,14 @@ from .base import (
 )
 from .gltf import write_gltf
 from .guard import READ_SECONDS, guarded, read_guarded
-from .images import INSIDE_FRACTION, MAX_PARTIAL_ALPHA, MIN_OBJECT_PIXELS, read_image
+from .images import (
+    INSIDE_FRACTION,
+    MAX_PARTIAL_ALPHA,
+    MIN_HOLE_AREA,
+    MIN_OBJECT_PIXELS,
+    mask_shape,
+    read_image,
+)
 from .meshes import read_mesh
 from .points import read_json, read_npy, read_npz, read_text, write_points
 from .results import result_summary, save_result, save_track
@@ -87,6 +94,7 @@ __all__ = [
     "Frames",
     "INSIDE_FRACTION",
     "MAX_PARTIAL_ALPHA",
+    "MIN_HOLE_AREA",
     "MESH_FORMATS",
     "MIN_OBJECT_PIXELS",
     "OUTPUT_MARKER",
@@ -99,6 +107,7 @@ __all__ = [
     "UNEVEN_SPACING",
     "atomic_output_dir",
     "atomic_write",
+    "mask_shape",
     "read_frames",
     "read_shape",
     "remove_leftovers",
@@ -177,17 +186,33 @@ def read_shape(path, options: ReadOptions | None = None, *, closed: bool | None 
     raw = read_guarded(_reader(path, name, opts), path, name, opts)
     if closed is None:
         closed = True if raw.closed is None else raw.closed
-    pts = raw.points
-    if raw.drop_closing_repeat and raw.faces is None and len(pts) > 1 and np.array_equal(
-            pts[0], pts[-1]):
-        pts = pts[:-1]  # a closed contour written with its first node repeated
+    pts, contours = raw.points, raw.contours
+    if raw.drop_closing_repeat and raw.faces is None:
+        pts, contours = _drop_closing_repeats(pts, contours)
     frame = raw.frame
     if opts.flip_y and frame is None and pts.ndim == 2 and pts.shape[1] == 2:
         pts, frame = pts * [1.0, -1.0], FLIPPED_FRAME  # y up -> image coordinates
     nodes = opts.nodes or raw.default_nodes
     if nodes is None and raw.faces is None:
-        nodes = uneven_nodes(name, pts, closed)
-    return make_shape(name, pts, faces=raw.faces, nodes=nodes, closed=closed, frame=frame)
+        nodes = uneven_nodes(name, pts, closed, contours)
+    return make_shape(name, pts, faces=raw.faces, nodes=nodes, closed=closed, frame=frame,
+                      contours=contours)
+
+
+def _drop_closing_repeats(pts: np.ndarray, contours) -> tuple[np.ndarray, tuple | None]:
+    """Each contour's last node dropped where it repeats its first (written closed)."""
+    sizes = contours or (len(pts),)
+    ends = np.cumsum(sizes)
+    keep = np.ones(len(pts), dtype=bool)
+    for k, end in zip(sizes, ends, strict=True):
+        if k > 1 and end <= len(pts) and np.array_equal(pts[end - k], pts[end - 1]):
+            keep[end - 1] = False
+    if keep.all():
+        return pts, contours
+    if contours is None:
+        return pts[keep], None
+    return pts[keep], tuple(int(np.count_nonzero(keep[e - k:e])) for k, e in zip(
+        sizes, ends, strict=True))
 
 
 def _read_options(options: ReadOptions | None, overrides: dict) -> ReadOptions:

@@ -20,7 +20,7 @@ from ..core.shape import ImageFrame, Shape
 from ..errors import InputFileError
 from ..options import ReadOptions
 from .base import DEFAULT_NODES, make_shape
-from .images import grey_levels, image_contour
+from .images import grey_levels, image_contours
 from .points import TEXT_SEPARATORS, load_npy, npz_arrays, parse_float
 
 __all__ = ["Frames", "file_frames", "natural_key", "sequence_files"]
@@ -121,9 +121,10 @@ def _image_frames(images, pattern: str, options: ReadOptions):
     names = [pattern.format(f) for f in range(len(images))]
     shapes = []
     for n, g in zip(names, map(np.asarray, images), strict=True):
-        pts = image_contour(g, n, options.threshold, options.object)
-        shapes.append(make_shape(n, pts, nodes=options.nodes or DEFAULT_NODES,
-                                 frame=ImageFrame(size=g.shape)))
+        parts = image_contours(g, n, options)
+        shapes.append(make_shape(n, np.vstack(parts), nodes=options.nodes or DEFAULT_NODES,
+                                 frame=ImageFrame(size=g.shape),
+                                 contours=tuple(map(len, parts)) if len(parts) > 1 else None))
     return names, shapes
 
 
