@@ -15,7 +15,7 @@ from ..errors import InputFileError
 from ..options import ReadOptions
 
 __all__ = ["DEFAULT_NODES", "FLIPPED_FRAME", "RawShape", "Reader", "UNEVEN_SPACING",
-           "make_shape", "uneven_nodes", "y_down"]
+           "extension", "make_shape", "uneven_nodes", "y_down"]
 
 _log = logging.getLogger(__name__)
 
@@ -28,6 +28,13 @@ DEFAULT_NODES = 200
 UNEVEN_SPACING = 4.0
 # The frame of a point file read with ``flip_y``: its y mirrored into image coordinates.
 FLIPPED_FRAME = ImageFrame(unit="input units (y mirrored)", y_down=True)
+
+
+def extension(path) -> str:
+    """A file's extension, lower case, the two of a compressed NIfTI file (``.nii.gz``)
+    together."""
+    name = Path(path).name.lower()
+    return ".nii.gz" if name.endswith(".nii.gz") else Path(name).suffix
 
 
 def y_down(shape) -> bool:

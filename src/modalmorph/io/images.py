@@ -56,6 +56,10 @@ MAX_PARTIAL_ALPHA = 0.2
 # each): 2010 holes, 38 % of one pixel (area 0.5), 18 % of two (1.5), 81 % below this;
 # their sizes run on without a gap up to 5940 px^2, so this drops only specks of noise.
 MIN_HOLE_AREA = MIN_OBJECT_PIXELS - 0.5
+# An image of at most this many levels may be a label image (a segmentation), and its
+# refusal also proposes ``label``. A choice: segmentations name a few structures (ACDC: 4
+# values, background included; the 17 AHA segments: 18), grey images have tens to 256.
+MAX_LABELS = 20
 
 _log = logging.getLogger(__name__)
 
@@ -147,7 +151,7 @@ def _label_pixels(array: np.ndarray, name: str, label) -> np.ndarray:
         return pixels
     if len(levels) > 2:
         raise InputFileError(f"{name}: a label image ({len(levels)} values: "
-                             f"{_listed(levels)}): give the object's label")
+                             f"{_listed(levels)}): give label= the object's value")
     if len(levels) == 1:
         raise InputFileError(f"{name}: no object in the mask: every pixel is {levels[0]}")
     return array == levels[-1]
@@ -204,10 +208,12 @@ def _image_mask(grey: np.ndarray, name: str, threshold: float | None) -> np.ndar
         if len(levels) > 2:
             from skimage.filters import threshold_otsu
 
+            labels = (f" or, for a label image, label= the object's value (one of "
+                      f"{_listed(levels)})" if len(levels) <= MAX_LABELS else "")
             raise InputFileError(f"{name}: a grey-level image ({len(levels)} levels, "
                                  f"{levels[0]}..{levels[-1]}), not a two-level mask: pass a "
                                  f"threshold, e.g. threshold={float(threshold_otsu(grey)):.6g} "
-                                 f"(Otsu's)")
+                                 f"(Otsu's){labels}")
         mask = grey == levels[-1]
         if len(levels) == 1:
             raise InputFileError(f"{name}: no object in the image: every pixel is {levels[0]}")
