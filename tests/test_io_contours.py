@@ -165,3 +165,64 @@ def test_nifti_without_nibabel_says_how_to_install(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "nibabel", None)
     with pytest.raises(InputFileError, match=r"a.nii: reading NIfTI .*modalmorph\[nifti\]"):
         read_shape(path)
+
+
+# ----------------------------------------------------------------- SVG and point files
+
+
+def _glyph_svg(path, text):
+    """An SVG of one <path> tracing ``text`` with matplotlib's TextPath (y flipped down)."""
+    from matplotlib.textpath import TextPath
+
+    glyph = TextPath((0, 0), text, size=100)
+    letter = {MplPath.MOVETO: "M", MplPath.LINETO: "L", MplPath.CURVE3: "Q",
+              MplPath.CURVE4: "C", MplPath.CLOSEPOLY: "Z"}
+    d = []
+    for verts, code in glyph.iter_segments():
+        xy = verts.reshape(-1, 2) * [1.0, -1.0] + [0.0, 100.0]
+        d.append(letter[code] + ("" if code == MplPath.CLOSEPOLY else
+                                 " ".join(f"{x:.4f} {y:.4f}" for x, y in xy)))
+    path.write_text('<svg xmlns="http://www.w3.org/2000/svg"><path d="'
+                    + " ".join(d) + '"/></svg>')
+    return path
+
+
+@pytest.mark.parametrize("text, count", [("B", 3), ("o", 2), ("l", 1)])
+def test_svg_glyph_gives_every_contour(tmp_path, text, count):
+    from modalmorph.core.quality import check_contours
+    from modalmorph.io import read_shape
+
+    shape = read_shape(_glyph_svg(tmp_path / f"{text}.svg", text))
+    assert len(shape.sizes) == count and shape.m == 200 and shape.closed
+    check_contours(shape, text)  # each contour simple, none crossing another
+    loops = [shape.points[s] for s in shape.slices]  # in the order drawn (the font's)
+    k = int(np.argmax([abs(area(p)) for p in loops]))
+    for j, hole in enumerate(loops):  # the holes inside the outline
+        assert j == k or MplPath(loops[k]).contains_points(hole).all()
+
+
+@pytest.mark.parametrize("ext", [".csv", ".tsv", ".txt", ".json", ".npz"])
+def test_contours_written_and_read_back(tmp_path, ext):
+    from modalmorph.io import read_shape, write_points
+
+    shape = mask_shape(ring(), "ring", nodes=90)
+    write_points(tmp_path / f"ring{ext}", shape)
+    back = read_shape(tmp_path / f"ring{ext}")
+    assert back.contours == shape.contours and len(back.sizes) == 2
+    np.testing.assert_array_equal(back.points, shape.points)  # written exactly
+
+
+def test_contour_column_rows_must_be_consecutive(tmp_path):
+    from modalmorph.io import read_shape
+
+    path = tmp_path / "bad.csv"
+    path.write_text("x,y,contour\n0,0,0\n1,0,0\n1,1,0\n5,5,1\n6,5,1\n6,6,1\n0,1,0\n")
+    with pytest.raises(InputFileError, match="rows of contour 0 are not consecutive"):
+        read_shape(path)
+    path.write_text('{"points": [[0, 0], [1, 0], [1, 1], [0, 1]], "contours": [2, 1.5]}')
+    path = path.rename(tmp_path / "bad.json")
+    with pytest.raises(InputFileError, match="contours must be a list of node counts"):
+        read_shape(path)
+    path.write_text('{"points": [[0, 0], [1, 0], [1, 1], [0, 1]], "contours": [3, 3]}')
+    with pytest.raises(InputFileError, match="bad.json: contours must be node counts"):
+        read_shape(path)
