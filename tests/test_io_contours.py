@@ -226,3 +226,75 @@ def test_contour_column_rows_must_be_consecutive(tmp_path):
     path.write_text('{"points": [[0, 0], [1, 0], [1, 1], [0, 1]], "contours": [3, 3]}')
     with pytest.raises(InputFileError, match="bad.json: contours must be node counts"):
         read_shape(path)
+
+
+# ------------------------------------------------------------------------------ writers
+
+
+def _ring_morph(nodes=60, steps=3):
+    """What the writers read of a morph (source, shapes, loads, node energy): a ring
+    growing by 10 % a step. A stand-in: the writers are tested apart from the dynamics."""
+    from types import SimpleNamespace
+
+    source = mask_shape(ring(), "ring", nodes=nodes)
+    c = source.points.mean(axis=0)
+    shapes = np.stack([c + (source.points - c) * 1.1**j for j in range(steps)])
+    return SimpleNamespace(source=source, shapes=shapes, loads=np.zeros_like(shapes),
+                           node_energy=np.zeros(shapes.shape[:2]))
+
+
+def _loops(edges, shape):
+    """Edges as sorted pairs; asserts each joins two nodes of one contour."""
+    edges = np.asarray(edges)
+    assert np.all(shape.contour_of[edges[:, 0]] == shape.contour_of[edges[:, 1]])
+    return {tuple(sorted(e)) for e in edges.tolist()}
+
+
+def test_vtk_and_ply_lines_are_the_contours(tmp_path):
+    import meshio
+
+    from modalmorph.io import write_step_meshes, write_vtk_series
+
+    morph = _ring_morph()
+    truth = _loops(morph.source.edges, morph.source)
+    assert len(truth) == morph.source.m  # closed: as many segments as nodes
+    write_vtk_series(morph, tmp_path / "vtk")
+    vtu = meshio.read(tmp_path / "vtk" / "morph_0002.vtu")
+    np.testing.assert_allclose(vtu.points[:, :2], morph.shapes[2])
+    assert _loops(vtu.cells_dict["line"], morph.source) == truth
+    (ply,) = write_step_meshes(morph, tmp_path / "ply", fmt="ply")[-1:]
+    assert _loops(meshio.read(ply).cells_dict["line"], morph.source) == truth
+
+
+def test_gltf_lines_are_the_contours(tmp_path):
+    from modalmorph.io import write_gltf
+
+    from .test_gltf import accessor, read_glb
+
+    morph = _ring_morph()
+    doc, blob = read_glb(write_gltf(morph, tmp_path / "ring.glb"))
+    (prim,) = doc["meshes"][0]["primitives"]
+    assert prim["mode"] == 1  # lines: pairs of indices, none joining the two loops
+    pairs = accessor(doc, blob, prim["indices"]).reshape(-1, 2)
+    assert _loops(pairs, morph.source) == _loops(morph.source.edges, morph.source)
+    one = _ring_morph()
+    one.source = one.source.contour(0)
+    one.shapes = one.shapes[:, : one.source.m]
+    doc, _ = read_glb(write_gltf(one, tmp_path / "one.glb"))
+    assert doc["meshes"][0]["primitives"][0]["mode"] == 2  # one contour: a line loop
+
+
+def test_result_files_keep_the_contours(tmp_path):
+    import modalmorph as mm
+    from modalmorph.io import read_shape, save_result
+
+    ring_morph = _ring_morph(steps=2)
+    source, target = ring_morph.source, ring_morph.source.with_points(ring_morph.shapes[1])
+    pairs = np.c_[np.arange(source.m), np.arange(source.m)]  # the known correspondence
+    morph = mm.morph(source, target, matching=pairs, max_steps=12)
+    save_result(morph, tmp_path)
+    final = read_shape(tmp_path / "final_shape.csv")
+    assert final.contours == source.contours
+    np.testing.assert_array_equal(final.points, morph.shapes[-1])
+    with np.load(tmp_path / "shapes.npz") as data:
+        assert tuple(data["contours"]) == source.contours

@@ -63,19 +63,13 @@ def read_text(path: Path, name: str, options: ReadOptions) -> RawShape:
         return [p.replace(",", ".") for p in parts] if sep == ";" else parts
 
     columns = None  # indices of x, y[, z] (then contour) when a header names them
-    contour = False
-    header_line, header = lines[0][0], fields(first)
+    header = fields(first)
+    names = [h.strip("\"'").strip().lower() for h in header]
     if not any(_is_number(f) for f in header):
+        columns = _named_columns(name, names, lines[0][0])
         lines = lines[1:]
         if not lines:
             raise InputFileError(f"{name}: the file has a header line but no data")
-        names = [h.strip("\"'").strip().lower() for h in header]
-        if "x" in names and "y" in names:
-            columns = [names.index(c) for c in ("x", "y", "z", "contour") if c in names]
-            contour = "contour" in names
-        elif len(names) not in (2, 3):
-            raise InputFileError(f"{name}: line {header_line} (header) has {len(names)} "
-                                 f"columns, expected 2 or 3 (x, y[, z])")
 
     rows, width = [], None
     for lineno, line in lines:
@@ -104,9 +98,20 @@ def read_text(path: Path, name: str, options: ReadOptions) -> RawShape:
                                  f"({', '.join(parts)})")
         rows.append(row)
     table = np.array(rows, dtype=np.float64)
-    if contour:
+    if columns is not None and "contour" in names:
         return RawShape(table[:, :-1], contours=contour_runs(name, table[:, -1]))
     return RawShape(table)
+
+
+def _named_columns(name: str, names: list, line: int) -> list | None:
+    """Indices of the columns ``x``, ``y`` (``z``, ``contour``) a header names, None when
+    it names no x and y (then 2 or 3 columns, in order)."""
+    if "x" in names and "y" in names:
+        return [names.index(c) for c in ("x", "y", "z", "contour") if c in names]
+    if len(names) not in (2, 3):
+        raise InputFileError(f"{name}: line {line} (header) has {len(names)} columns, "
+                             f"expected 2 or 3 (x, y[, z])")
+    return None
 
 
 def contour_runs(name: str, ids: np.ndarray) -> tuple[int, ...] | None:
@@ -121,6 +126,16 @@ def contour_runs(name: str, ids: np.ndarray) -> tuple[int, ...] | None:
                              f"starts it again)")
     sizes = np.diff(np.r_[starts, len(ids)])
     return tuple(int(k) for k in sizes) if len(sizes) > 1 else None
+
+
+def _checked(contours, m: int) -> tuple[int, ...] | None:
+    """Node counts given with an array, checked to split its ``m`` rows."""
+    if contours is None or len(contours) < 2:
+        return None
+    if sum(contours) != m or min(contours) < 1:
+        raise ShapeError(f"contours must be node counts summing to the {m} points, got "
+                         f"{list(contours)}")
+    return tuple(int(k) for k in contours)
 
 
 def _is_number(text: str) -> bool:
@@ -265,7 +280,7 @@ def read_json(path: Path, name: str, options: ReadOptions) -> RawShape:
                     contours=contours)
 
 
-def write_points(path, points) -> None:
+def write_points(path, points, *, contours=None) -> None:
     """Write nodes to a file, the format chosen by its extension, atomically.
 
     Parameters
@@ -278,6 +293,9 @@ def write_points(path, points) -> None:
         (``{"points": [[x, y], ...]}``, plus ``"closed"``, ``"faces"`` and ``"contours"``
         for a :class:`Shape`). Numbers are written exactly (shortest round-trip form).
     points : array_like, shape (m, 2) or (m, 3), or Shape
+    contours : sequence of int, optional
+        For an array: the node counts of its contours, written as a :class:`Shape`'s
+        (a ``contour`` column, ``"contours"``); a Shape has its own.
 
     Raises
     ------
@@ -296,32 +314,30 @@ def write_points(path, points) -> None:
     if ext not in WRITABLE:
         raise ValueError(f"{name}: cannot write {path.suffix!r} files; supported: "
                          f"{', '.join(WRITABLE)}")
-    contours = shape.contours if shape is not None else None
+    contours = shape.contours if shape is not None else _checked(contours, len(pts))
     with atomic_write(path) as tmp:
         if ext in TEXT_SEPARATORS:
             sep = TEXT_SEPARATORS[ext]
             names = ["x", "y", "z"][: pts.shape[1]] + (["contour"] if contours else [])
-            ids = [[repr(int(k))] for k in shape.contour_of] if contours else [[]] * len(pts)
+            ids = ([[repr(int(k))] for k in np.repeat(np.arange(len(contours)), contours)]
+                   if contours else [[]] * len(pts))
             body = "".join(sep.join([*(repr(float(v)) for v in row), *c]) + "\n"
                            for row, c in zip(pts, ids, strict=True))
             tmp.write_text(sep.join(names) + "\n" + body, encoding="utf-8")
         elif ext == ".npy":
             np.save(tmp, pts)
         elif ext == ".npz":
-            extra = {}
+            extra = {"contours": np.array(contours)} if contours else {}
             if shape is not None:
                 extra["closed"] = np.bool_(shape.closed)
                 if shape.faces is not None:
                     extra["faces"] = shape.faces
-                if contours:
-                    extra["contours"] = np.array(contours)
             np.savez(tmp, points=pts, **extra)
         else:
-            data = {"points": pts.tolist()}
+            data = {"points": pts.tolist(), **({"contours": list(contours)} if contours
+                                               else {})}
             if shape is not None:
                 data["closed"] = bool(shape.closed)
                 if shape.faces is not None:
                     data["faces"] = shape.faces.tolist()
-                if contours:
-                    data["contours"] = list(contours)
             tmp.write_text(json.dumps(data) + "\n", encoding="utf-8")

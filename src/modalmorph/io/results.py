@@ -63,8 +63,15 @@ def save_result(morph, out_dir, *, options: dict | None = None,
             node_energy=np.asarray(morph.node_energy, dtype=np.float64),
             energy=np.asarray(morph.energy, dtype=np.float64),
             mean_distance=np.asarray(morph.mean_distance, dtype=np.float64),
-            pairs=_pairs_array(morph))
-    write_points(out_dir / "final_shape.csv", shapes[-1])
+            pairs=_pairs_array(morph), **_contours(morph.source))
+    write_points(out_dir / "final_shape.csv", shapes[-1],
+                 contours=getattr(morph.source, "contours", None))
+
+
+def _contours(source) -> dict:
+    """``{"contours": node counts}`` for a source of several contours, else nothing."""
+    contours = getattr(source, "contours", None)
+    return {"contours": np.array(contours, dtype=np.int64)} if contours else {}
 
 
 def result_summary(morph, *, options: dict | None = None, inputs: list | None = None) -> dict:
