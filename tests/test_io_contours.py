@@ -298,3 +298,55 @@ def test_result_files_keep_the_contours(tmp_path):
     np.testing.assert_array_equal(final.points, morph.shapes[-1])
     with np.load(tmp_path / "shapes.npz") as data:
         assert tuple(data["contours"]) == source.contours
+
+
+# ------------------------------------------------------------------------------ figures
+
+
+def _pixels(fig):
+    fig.canvas.draw()
+    return np.asarray(fig.canvas.buffer_rgba())[..., :3]
+
+
+def _background_between_loops(ax, rgb, centre, radii):
+    """Whether every pixel of the annulus ``radii`` (data units) about ``centre``, where
+    no loop runs, is the axes' white, and the hole's centre too."""
+    t = np.linspace(0, 2 * np.pi, 720, endpoint=False)
+    r = np.linspace(*radii, 9)
+    pts = np.concatenate([centre + np.c_[np.cos(t), np.sin(t)] * k for k in r] + [[centre]])
+    xy = ax.transData.transform(pts)
+    cols = np.round(xy[:, 0]).astype(int)
+    rows = np.round(rgb.shape[0] - xy[:, 1]).astype(int)
+    return np.all(rgb[rows, cols] > 240, axis=1)
+
+
+def test_ring_figures_draw_separate_loops(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import modalmorph as mm
+    from modalmorph.figures import animate, plot_matches, plot_shapes
+
+    ring_morph = _ring_morph(steps=2)  # radii 30 and 15 about (50, 45), then 10 % larger
+    source, target = ring_morph.source, ring_morph.source.with_points(ring_morph.shapes[1])
+    pairs = np.c_[np.arange(source.m), np.arange(source.m)]
+    morph = mm.morph(source, target, matching=pairs, max_steps=12)
+    centre = source.points.mean(axis=0)
+    # between the hole (r <= 16.5) and the outer loop (r >= 30) nothing is drawn: a
+    # segment joining the two loops (the last node of one to the first of the next)
+    # would cross this annulus; the hole's centre is background
+    for draw in (lambda: plot_matches(source, target, pairs),
+                 lambda: plot_shapes(morph, color_by=None)):
+        ax = draw()
+        blank = _background_between_loops(ax, _pixels(ax.figure), centre, (19.0, 27.0))
+        assert blank.all(), f"{np.count_nonzero(~blank)} drawn pixels between the loops"
+        bridge = mm.Shape(source.points)  # drawn as one contour: the check sees the bridge
+        ax = plot_matches(bridge, bridge.with_points(target.points), pairs)
+        assert not _background_between_loops(ax, _pixels(ax.figure), centre,
+                                              (19.0, 27.0)).all()
+        matplotlib.pyplot.close("all")
+    animate(morph, tmp_path / "ring.gif", color_by=None)
+    from PIL import Image
+
+    with Image.open(tmp_path / "ring.gif") as gif:
+        assert gif.n_frames == len(morph.shapes)
