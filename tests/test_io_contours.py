@@ -350,3 +350,51 @@ def test_ring_figures_draw_separate_loops(tmp_path):
 
     with Image.open(tmp_path / "ring.gif") as gif:
         assert gif.n_frames == len(morph.shapes)
+
+
+# ---------------------------------------------------------------------- command line
+
+
+def _png(path, mask):
+    from PIL import Image
+
+    Image.fromarray(np.asarray(mask, dtype=np.uint8)).save(path)
+    return path
+
+
+def test_cli_morph_on_ring_masks_keeps_both_contours(tmp_path):
+    from modalmorph.apps.cli import main
+    from modalmorph.io import read_shape
+
+    a = _png(tmp_path / "a.png", ring() * 255)
+    b = _png(tmp_path / "b.png", ring(outer=32.0, inner=17.0) * 255)
+    assert len(read_shape(a).sizes) == len(read_shape(b).sizes) == 2
+    out = tmp_path / "out"
+    assert main(["morph", str(a), str(b), "--out", str(out), "--nodes", "80", "-q",
+                 "--no-figures", "--no-gif", "--max-steps", "4"]) in (0, 3)
+    final = read_shape(out / "final_shape.csv")
+    assert len(final.sizes) == 2 and final.sizes == read_shape(a, nodes=80).sizes
+
+
+def test_cli_label_flag_and_bad_sequences(tmp_path, capsys):
+    from modalmorph.apps.cli import main
+    from modalmorph.io import read_shape
+
+    labels = np.zeros((90, 120), dtype=np.uint8)
+    labels[10:40, 10:40], labels[50:80, 60:110], labels[20:30, 70:100] = 1, 2, 3
+    path = _png(tmp_path / "labels.png", labels)
+    shape = read_shape(path, label=3)
+    assert np.ptp(shape.points, axis=0) == pytest.approx([30.0, 10.0], abs=1.0)
+    with pytest.raises(InputFileError, match="label= applies to images only"):
+        read_shape(_save_csv(tmp_path / "a.csv"), label=2)
+    small = _png(tmp_path / "small.png", (labels[:80] == 2) * 255)
+    big = _png(tmp_path / "big.png", (labels == 2) * 255)
+    assert main(["track", str(big), str(small), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{small}: the image is 120 x 80 px" in err[0]
+
+
+def _save_csv(path):
+    t = np.linspace(0, 2 * np.pi, 20, endpoint=False)
+    np.savetxt(path, np.c_[np.cos(t), np.sin(t)], delimiter=",", header="x,y", comments="")
+    return path
