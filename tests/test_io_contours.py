@@ -398,3 +398,29 @@ def _save_csv(path):
     t = np.linspace(0, 2 * np.pi, 20, endpoint=False)
     np.savetxt(path, np.c_[np.cos(t), np.sin(t)], delimiter=",", header="x,y", comments="")
     return path
+
+
+def test_csv_frames_with_contour_column(tmp_path):
+    from modalmorph.io import read_frames
+
+    rows = []
+    for f in range(3):
+        shape = mask_shape(ring(outer=30.0 - f, inner=15.0 - f), "ring", nodes=40)
+        rows += [[f, *p, c] for p, c in zip(shape.points, shape.contour_of, strict=True)]
+    path = tmp_path / "frames.csv"
+    np.savetxt(path, rows, delimiter=",", header="frame,x,y,contour", comments="")
+    frames = read_frames(path)
+    assert len(frames.shapes) == 3 and all(len(s.sizes) == 2 for s in frames.shapes)
+    np.testing.assert_allclose(frames.shapes[2].points, shape.points)
+
+
+def test_track_files_keep_the_contours(tmp_path):
+    import modalmorph as mm
+    from modalmorph.io import save_track
+
+    frames = [mask_shape(ring(outer=30.0 - f, inner=15.0 - 0.5 * f), "ring", nodes=60)
+              for f in range(3)]
+    result = mm.track(frames)
+    save_track(result, tmp_path)
+    with np.load(tmp_path / "track.npz") as data:
+        assert tuple(data["contours"]) == frames[0].contours

@@ -30,7 +30,7 @@ from ..options import ReadOptions
 from .atomic import atomic_write
 from .base import RawShape
 
-__all__ = ["TEXT_SEPARATORS", "WRITABLE", "load_npy", "npz_arrays", "parse_float",
+__all__ = ["TEXT_SEPARATORS", "WRITABLE", "contour_runs", "load_npy", "npz_arrays", "parse_float",
            "read_json", "read_npy", "read_npz", "read_text", "write_points"]
 
 # The text formats written, with their column separator (any is read).

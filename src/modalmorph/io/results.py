@@ -193,7 +193,7 @@ def save_track(track, out_dir, *, options: dict | None = None,
             cumulative_energy=track.cumulative_energy, strain=track.strain,
             distance=track.distance, edges=track.edges, edge_strain=track.edge_strain,
             segment_strain=track.segment_strain, segment_of_edge=track.segment_of_edge,
-            crossed=track.crossed)
+            crossed=track.crossed, **_contours(track.frames[0]))
     n_seg = track.segment_strain.shape[1]
     table = np.column_stack([np.arange(track.n_frames), track.strain, track.segment_strain])
     header = ",".join(["frame", "global", *[f"segment_{s + 1}" for s in range(n_seg)]])
