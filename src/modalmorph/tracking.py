@@ -335,9 +335,10 @@ def _like_first(shape: Shape, first: Shape) -> Shape:
     frame 0 (:func:`~modalmorph.matching.contours.pair_contours` in the frames' common
     frame) and, closed 2D ones, running the same way round as them."""
     if len(shape.sizes) != len(first.sizes) or not shape.ordered:
-        raise ShapeError(f"it has {len(shape.sizes) or 'no'} contour(s) but frame 0 has "
-                         f"{len(first.sizes)}: the frames of a sequence of several "
-                         "contours must have as many contours")
+        count = len(shape.sizes)
+        raise ShapeError(f"it has {count or 'no'} contour{'' if count == 1 else 's'} but "
+                         f"frame 0 has {len(first.sizes)}: the frames of a sequence of "
+                         "several contours must have as many contours")
     partner = pair_contours(first, shape)[:, 1]
     pieces = []
     for k, j in enumerate(partner):

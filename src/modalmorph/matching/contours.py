@@ -3,9 +3,12 @@
 One contour is matched by the ordered (cyclic) search of the default matcher. An object of
 several contours (:attr:`Shape.contours`) is matched in three stages:
 
-1. the pose of the whole object: the default matcher on all its nodes as one unordered
-   2D set (``ordered=False``), with the caller's ``rotation``; Horn's similarity of its
-   pairs (translation and scale only with ``rotation="none"``) places the source;
+1. the pose of the whole object: the default (ordered) matcher on the largest contour of
+   each object (the epicardium of a ring, the forefoot of a footprint), with the
+   caller's ``rotation``; Horn's similarity of its pairs (translation and scale only
+   with ``rotation="none"``) places the whole source. (All the nodes as one unordered
+   2D set kept the common frame of a lobed ring turned by 40 or 160 degrees with
+   ``rotation="auto"``; the largest contours find the turn: benchmarks/contours.py);
 2. partner contours: an assignment (:func:`scipy.optimize.linear_sum_assignment`) over
    the two-way mean distance of each placed source contour to each target contour
    (:func:`pair_contours`); with unequal contour counts the extra contours stay
@@ -72,19 +75,21 @@ def keep_partners(a: Shape, b: Shape, pairs: np.ndarray, partners: np.ndarray
     return partner[a.contour_of[pairs[:, 0]]] == b.contour_of[pairs[:, 1]]
 
 
-def whole_pose(src: Shape, tgt: Shape, rotation: str, match_one: Callable) -> Similarity:
-    """The pose of the whole source: Horn's similarity of the pairs the default matcher
-    finds between all the nodes as unordered sets (``match_one(a, b, rotation=...)``
-    returns a Matching); no rotation with ``rotation="none"``."""
-    a = Shape(src.points, ordered=False, frame=src.frame)
-    b = Shape(tgt.points, ordered=False, frame=tgt.frame)
-    found = match_one(a, b, method="auto", rotation=rotation).pairs
-    if len(found) < 2:
-        raise ShapeError("the source and target share too few nodes to place one on the "
-                         f"other: {len(found)} pair(s) between their {src.m} and {tgt.m} "
-                         "nodes")
-    return align(src.points[found[:, 0]], tgt.points[found[:, 1]],
-                 rotate=rotation != "none")
+def largest(shape: Shape) -> int:
+    """The contour enclosing the largest area (closed 2D contours), else the longest."""
+    if shape.dim == 2 and shape.closed:
+        return int(np.argmax([abs(area(shape.points[r])) for r in shape.slices]))
+    return int(np.argmax([np.linalg.norm(np.diff(shape.points[r], axis=0), axis=1).sum()
+                          for r in shape.slices]))
+
+
+def object_pose(src: Shape, tgt: Shape, rotation: str, match_one: Callable) -> Similarity:
+    """The pose of the whole source: Horn's similarity of the pairs the ordered matcher
+    finds between the largest contour of each object (``match_one(a, b)`` returns a
+    Matching), with the caller's ``rotation``; no rotation with ``rotation="none"``."""
+    a, b = src.contour(largest(src)), tgt.contour(largest(tgt))
+    found = match_one(a, b).pairs
+    return align(a.points[found[:, 0]], b.points[found[:, 1]], rotate=rotation != "none")
 
 
 def match_contours(src: Shape, tgt: Shape, rotation: str, match_one: Callable):
@@ -98,7 +103,7 @@ def match_contours(src: Shape, tgt: Shape, rotation: str, match_one: Callable):
     if src.dim != 2:
         raise ShapeError("shapes of several contours are matched in 2D only; match each "
                          "3D polyline on its own (Shape.contour(k))")
-    pose = whole_pose(src, tgt, rotation, match_one)
+    pose = object_pose(src, tgt, rotation, match_one)
     placed = pose.apply(src.points)
     partners = pair_contours(src, tgt, placed)
     pairs, cost = [], []
