@@ -173,8 +173,9 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
 
 def _unpaired(src: Shape, tgt: Shape, partners: np.ndarray) -> str:
     """The message's sentence on contours without a partner ('' when none), logged."""
-    said = unpaired_sentence(src, tgt, partners, "a source contour moves with its "
-                             "nearest pulled nodes; neither is measured by the stop test")
+    said = unpaired_sentence(src, tgt, partners, (
+        "moved with its nearest pulled nodes, not measured by the stop test",
+        "not measured by the stop test"))
     if said:
         log.warning("morph: %s", said)
         return "; " + said

@@ -122,16 +122,15 @@ def match_contours(src: Shape, tgt: Shape, rotation: str, match_one: Callable):
 
 
 def unpaired_sentence(src: Shape, tgt: Shape, partners: np.ndarray,
-                      outcome: str = "left unmatched") -> str:
-    """A sentence naming the contours without a partner and their ``outcome`` ('' when
-    every contour has one)."""
+                      outcome: tuple[str, str] = ("left unmatched", "left unmatched")) -> str:
+    """A sentence naming the contours without a partner, each side with its ``outcome``
+    (source, target); '' when every contour has one."""
     said = []
     for name, shape, col in (("source", src, 0), ("target", tgt, 1)):
         left = sorted(set(range(len(shape.sizes))) - set(partners[:, col].tolist()))
         if left:
             nodes = ", ".join(str(shape.sizes[k]) for k in left)
-            said.append(f"{name} contour{'s' if len(left) > 1 else ''} "
-                        f"{', '.join(str(k) for k in left)} ({nodes} nodes)")
-    if not said:
-        return ""
-    return " and ".join(said) + f" without a partner contour: {outcome}"
+            which = ", ".join(str(k) for k in left)
+            said.append(f"{name} contour{'s' if len(left) > 1 else ''} {which} ({nodes} "
+                        f"nodes) without a partner contour: {outcome[col]}")
+    return "; ".join(said)
