@@ -118,7 +118,7 @@ def test_footprint_three_blobs():
 
 def test_unequal_contour_counts_name_the_unpaired(caplog):
     a, b = footprint(), footprint(toes=False, shift=(1.0, 0.0))
-    with caplog.at_level(logging.WARNING, logger="modalmorph"):
+    with caplog.at_level(logging.INFO, logger="modalmorph"):
         r = mm.morph(a, b)
     assert r.matching.contours.tolist() == [[0, 0], [1, 1]]
     assert "source contour 2 (24 nodes) without a partner contour" in r.message

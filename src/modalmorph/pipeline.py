@@ -177,7 +177,7 @@ def _unpaired(src: Shape, tgt: Shape, partners: np.ndarray) -> str:
         "moved with its nearest pulled nodes, not measured by the stop test",
         "not measured by the stop test"))
     if said:
-        log.warning("morph: %s", said)
+        log.info("morph: %s", said)
         return "; " + said
     return ""
 
