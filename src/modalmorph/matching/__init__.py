@@ -314,8 +314,9 @@ def match(source, target, *, options: MatchOptions | None = None, **overrides) -
         Arrays become :class:`Shape` with its defaults (2D: closed ordered contour; 3D:
         unordered point cloud); pass a ``Shape`` for an open contour (``closed=False``)
         or an unordered 2D set (``ordered=False``). Shapes of several contours
-        (``Shape(points, contours=...)``; 2D contours or 3D polylines): partner contours are found and matched
-        pair by pair (:mod:`~modalmorph.matching.contours`, ``Matching.contours``).
+        (``Shape(points, contours=...)``; 2D contours or 3D polylines): partner
+        contours are found and matched pair by pair
+        (:mod:`~modalmorph.matching.contours`, ``Matching.contours``).
     options : MatchOptions, optional
         ``method`` (``"auto"``: the default matcher, invariant to translation, rotation,
         scale, start node and direction of a contour; ``"local"``, ``"global"``: the
