@@ -94,6 +94,7 @@ def test_ring_partners_survive_a_turn(turn):
     r = mm.morph(a, b, matching=m)
     assert r.converged, r.message
     assert max(contour_gaps(r.shapes[-1], a, b, m.contours)) < ON_CURVE
+    assert max(crossings(p, a) for p in r.shapes) == 0
 
 
 def test_contours_listed_in_another_order_keep_their_partners():
