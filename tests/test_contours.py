@@ -97,6 +97,16 @@ def test_ring_partners_survive_a_turn(turn):
     assert max(crossings(p, a) for p in r.shapes) == 0
 
 
+def test_unmatched_nodes_walk_along_their_own_contour():
+    a, b = ring(30, 20, 60, 40), ring(27, 15, 60, 40)
+    given = np.c_[np.arange(100), np.arange(100)]
+    gap = np.r_[55:60, 60:65]  # the last outer nodes and the first inner ones
+    r = mm.morph(a, b, matching=np.delete(given, gap, axis=0))
+    assert r.converged, r.message
+    assert max(contour_gaps(r.shapes[-1], a, b, [(0, 0), (1, 1)])) < ON_CURVE
+    assert max(crossings(p, a) for p in r.shapes) == 0
+
+
 def test_contours_listed_in_another_order_keep_their_partners():
     a = ring(30, 20, 60, 40)
     b = ring(27, 15, 70, 35)
