@@ -424,3 +424,19 @@ def test_track_files_keep_the_contours(tmp_path):
     save_track(result, tmp_path)
     with np.load(tmp_path / "track.npz") as data:
         assert tuple(data["contours"]) == frames[0].contours
+
+
+def test_cli_morph_and_track_on_svg_o(tmp_path):
+    from modalmorph.apps.cli import main
+    from modalmorph.io import read_shape
+
+    a = _glyph_svg(tmp_path / "a.svg", "o")
+    b = tmp_path / "b.svg"  # the same glyph, 10 % wider
+    b.write_text(a.read_text().replace("<path ", '<path transform="scale(1.1, 1)" '))
+    for verb in ("morph", "track"):
+        out = tmp_path / verb
+        assert main([verb, str(a), str(b), "--out", str(out), "--nodes", "80", "-q",
+                     "--no-figures", "--no-gif"]) in (0, 3)
+    assert len(read_shape(tmp_path / "morph" / "final_shape.csv").sizes) == 2
+    with np.load(tmp_path / "track" / "track.npz") as data:
+        assert len(data["contours"]) == 2 and data["points"].shape[1] == 80
