@@ -18,6 +18,7 @@ directions (nibabel's ``aff2axcodes``, e.g. ``('R', 'A', 'S')``) are logged.
 from __future__ import annotations
 
 import logging
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +34,7 @@ __all__ = ["NIFTI_EXTENSIONS", "nifti_frames", "nifti_grid", "read_nifti"]
 NIFTI_EXTENSIONS = (".nii", ".nii.gz")
 
 _log = logging.getLogger(__name__)
+_HEARING = threading.Lock()
 
 
 def read_nifti(path: Path, name: str, options: ReadOptions) -> RawShape:
@@ -75,14 +77,17 @@ def _load(path: Path, name: str):
                              f"pip install 'modalmorph[nifti]'") from None
     said = _Said()
     logger = logging.getLogger("nibabel.global")  # where nibabel says what it fixed
-    handlers = logger.handlers[:]
-    logger.handlers = [said]
-    try:
-        image = nibabel.load(path)
-    except (OSError, ValueError, EOFError, nibabel.filebasedimages.ImageFileError) as exc:
-        raise InputFileError(f"{name}: cannot read the NIfTI file: {_line(exc)}") from None
-    finally:
-        logger.handlers = handlers
+    with _HEARING:  # one reader at a time swaps the handlers (the app reads in threads)
+        handlers = logger.handlers[:]
+        logger.handlers = [said]
+        try:
+            image = nibabel.load(path)
+        except (OSError, ValueError, EOFError,
+                nibabel.filebasedimages.ImageFileError) as exc:
+            raise InputFileError(f"{name}: cannot read the NIfTI file: {_line(exc)}") \
+                from None
+        finally:
+            logger.handlers = handlers
     for text in said.lines:  # a spacing nibabel replaced by 1 is no spacing: refused
         if "pixdim" in text:
             raise InputFileError(f"{name}: the header's pixel spacing is invalid: {text}")
