@@ -296,8 +296,9 @@ def _shapes(source, target) -> tuple[Shape, Shape]:
         if shape.dim == 2 and shape.ordered and shape.closed and min(
                 abs(area(shape.normalized[r])) for r in shape.slices) < FLAT_AREA:
             raise ShapeError(f"{name} is a closed contour with no area (its nodes lie on "
-                             "one line): a closed contour must enclose an area (an open "
-                             "curve is Shape(points, closed=False))")
+                             "one line): a closed contour must enclose an area; for an open "
+                             "curve pass Shape(points, closed=False), or in a file "
+                             "JSON {\"closed\": false} or an NPZ 'closed' array")
     if src.dim != tgt.dim:
         raise ShapeError(f"source and target must have the same dimension, got "
                          f"{src.dim}D and {tgt.dim}D")
