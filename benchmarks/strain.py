@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
+from modalmorph.cardiac import StrainOptions, mask_ring, strain, wall_strain
 from modalmorph.core.shape import resample
 from modalmorph.phantoms import ring_phantom
-from modalmorph.strain import StrainOptions, mask_ring, strain, wall_strain
 
 FRAMES, ES = 30, 15
 PHANTOMS = {
@@ -108,16 +108,22 @@ def hearts() -> None:
     if not HEARTS.is_dir():
         print(f"\nhearts: {HEARTS} not found")
         return
-    slices = {}
+    patients = {}
     for path in sorted(HEARTS.glob("*.csv")):
-        number = int(path.stem.split("-")[-1] if "contour" not in path.stem
-                     else path.stem.split("-")[-3])
-        patient = path.stem.rsplit("-", 1 if "contour" not in path.stem else 3)[0]
-        slices.setdefault((patient, (number - 1) // 20), []).append(path)
-    print("\nhearts (endocardium only): global endocardial circumferential strain ED -> ES")
-    for (patient, block), paths in slices.items():
-        if len(paths) != 2:
+        stem = path.stem.replace("-icontour-manual", "")
+        patient, number = stem.rsplit("-", 1)
+        patients.setdefault(patient, []).append((int(number), path))
+    pairs = []
+    for files in patients.values():
+        if len(files) == 2:  # one ED/ES pair
+            pairs.append([p for _, p in files])
             continue
+        blocks = {}
+        for number, path in files:
+            blocks.setdefault((number - 1) // 20, []).append(path)
+        pairs += [b for b in blocks.values() if len(b) == 2]
+    print("\nhearts (endocardium only): global endocardial circumferential strain ED -> ES")
+    for paths in pairs:
         shapes = [np.loadtxt(p, delimiter=",", skiprows=1) for p in paths]
         area = [abs(_area(s)) for s in shapes]
         if area[1] > area[0]:

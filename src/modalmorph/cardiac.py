@@ -22,6 +22,9 @@ the reference frame ``r`` (end-diastole, frame 0 by default), in percent:
   per second given the frame interval; **peaks**: the value of largest magnitude and its
   frame.
 
+(The module is ``cardiac``, not ``strain``: a submodule named like the function would
+replace ``modalmorph.strain`` by itself once imported.)
+
 With ``endo_only=True`` (the blood pool, or endocardial contours) only the endocardial
 circumferential strain is measured; the other columns are NaN.
 """
@@ -531,9 +534,8 @@ def _choose(wall: np.ndarray, choice, name: str) -> np.ndarray:
 
 def _outline(region: np.ndarray, spacing) -> np.ndarray:
     """The boundary of a region as a closed contour of ``nodes`` nodes (x, y)."""
-    from skimage.measure import find_contours
-
     from scipy.ndimage import gaussian_filter
+    from skimage.measure import find_contours
 
     pad = int(np.ceil(3 * SMOOTH)) + 1  # the blur spreads 3 sigma: closed contours
     blurred = gaussian_filter(np.pad(region.astype(float), pad), SMOOTH)
