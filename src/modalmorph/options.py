@@ -473,8 +473,8 @@ def parse_value(name: str, kind: str, value):
 
     Kinds: ``bool``, ``int``, ``float``, ``str``; ``modes`` ("all", a count or a fraction
     such as "2/3" or 0.66); ``damping`` (one or two numbers); ``point`` (two numbers x,y);
-    ``material`` (a name or three numbers E, nu, rho); ``object`` (largest, center or a label number). ``None``
-    and empty text give ``None`` (the default).
+    ``material`` (a name or three numbers E, nu, rho); ``object`` (largest, center or a
+    label number). ``None`` and empty text give ``None`` (the default).
     """
     if value is None or isinstance(value, str) and not value.strip():
         return None
