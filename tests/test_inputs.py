@@ -94,7 +94,7 @@ def test_mixed_y_directions_warn_once_and_flip_y_mirrors(tmp_path):
         -plain.points[0, 1]
 
 
-def test_ring_masks_say_only_the_outer_boundary_is_used(tmp_path, caplog):
+def test_ring_masks_give_the_outer_boundary_and_the_hole(tmp_path, caplog):
     from PIL import Image
 
     yy, xx = np.mgrid[:120, :120]
@@ -102,11 +102,12 @@ def test_ring_masks_say_only_the_outer_boundary_is_used(tmp_path, caplog):
     Image.fromarray(((r < 40) & (r > 20)).astype(np.uint8) * 255).save(tmp_path / "ring.png")
     Image.fromarray((r < 40).astype(np.uint8) * 255).save(tmp_path / "disc.png")
     with caplog.at_level(logging.WARNING, logger="modalmorph.io"):
-        read_shape(tmp_path / "disc.png")
-        assert not caplog.records
-        read_shape(tmp_path / "ring.png")
-    [record] = caplog.records
-    assert "1 hole" in record.getMessage() and "only its outer boundary" in record.getMessage()
+        assert read_shape(tmp_path / "disc.png").contours is None
+        ring = read_shape(tmp_path / "ring.png")
+    assert not caplog.records
+    assert len(ring.sizes) == 2 and ring.m == 200
+    radii = [np.hypot(*(ring.points[s] - 60.0).T).mean() for s in ring.slices]
+    assert_allclose(radii, [40.0, 20.0], atol=1.0)  # boundaries at half level: within 1 px
 
 
 def test_library_figures_follow_the_shapes_frame(tmp_path):

@@ -314,14 +314,18 @@ def test_image_dark_object_one_bit_and_holes(tmp_path):
     from PIL import Image
 
     mask = _ellipse_mask()
-    ring = mask & ~_ellipse_mask(axes=(10.0, 8.0))  # a hole: the outer contour is kept
+    hole = _ellipse_mask(axes=(10.0, 8.0))
+    ring = mask & ~hole  # a hole: a second contour, after the outer one
     small = _ellipse_mask(centre=(145.0, 10.0), axes=(5.0, 5.0))  # a smaller object
     Image.fromarray(np.where(ring | small, 0, 255).astype(np.uint8)).save(tmp_path / "a.png")
-    _check_ellipse(read_shape(tmp_path / "a.png"), mask)
     Image.fromarray(ring).save(tmp_path / "b.png")  # a 1-bit image
     with Image.open(tmp_path / "b.png") as image:
         assert image.mode == "1"
-    _check_ellipse(read_shape(tmp_path / "b.png"), mask)
+    for name in ("a.png", "b.png"):
+        shape = read_shape(tmp_path / name)
+        assert len(shape.sizes) == 2
+        _check_ellipse(shape.contour(0), mask)
+        assert_allclose(-_area(shape.points[shape.slices[1]]), hole.sum(), rtol=0.1)
 
 
 def test_image_grey_with_threshold(tmp_path, rng):
@@ -410,7 +414,7 @@ def test_image_object_choice_is_logged_and_prefers_objects_inside(tmp_path, capl
     assert_allclose(np.ptp(strip.points, axis=0), (29.0, 79.0), atol=1.0)
     with pytest.raises(ValueError, match=_err(path) + r"object=9, but the image has 4 "):
         read_shape(path, object=9)
-    with pytest.raises(OptionError, match="object must be one of largest, center or a label"):
+    with pytest.raises(OptionError, match="object must be one of largest, center, all or a "):
         read_shape(path, object="biggest")  # checked once, by ReadOptions
 
 

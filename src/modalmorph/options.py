@@ -45,7 +45,7 @@ ROTATIONS = ("auto", "free", "none")
 FREE_MOTIONS = ("similarity", "none")
 LOADS = ("consistent", "nodal")
 SCHEMES = ("implicit", "explicit")
-OBJECTS = ("largest", "center")  # or a label number of the image's objects
+OBJECTS = ("largest", "center", "all")  # or a number of the image's objects
 FRAME_SPACINGS = ("time", "path")
 STEP_MESHES = ("none", "ply", "obj")  # OutputOptions.meshes
 REFERENCES = ("previous", "first")
@@ -274,8 +274,11 @@ class ReadOptions(_Options):
         group="input", kind="float")
     object: str | int = _opt(
         "largest", "images: which object to take: largest, center (the one nearest the "
-        "image centre) or a label number (1 = the first in reading order)",
-        group="input", kind="object", choices=OBJECTS)
+        "image centre), all (every object, its contours one after another) or a number "
+        "(1 = the first in reading order)", group="input", kind="object", choices=OBJECTS)
+    label: int | None = _opt(
+        None, "label images (segmentations, NIfTI): the value of the object's pixels",
+        group="input", kind="int")
 
     flip_y: bool = _opt(
         False, "mirror the y of 2D point files (CSV, TSV, TXT, NPY, NPZ, JSON: y up) into "
@@ -287,6 +290,8 @@ class ReadOptions(_Options):
             raise OptionError(f"nodes must be an integer >= 3, got {self.nodes!r}")
         if self.threshold is not None and not _is_number(self.threshold):
             raise OptionError(f"threshold must be a number, got {self.threshold!r}")
+        if self.label is not None and not _is_int(self.label):
+            raise OptionError(f"label must be an integer, got {self.label!r}")
 
 
 @dataclass(frozen=True)

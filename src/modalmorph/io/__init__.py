@@ -9,14 +9,16 @@ extensions                             content                             modul
 ``.npy`` ``.npz``                      an (m, d) array                     :mod:`.points`
 ``.json``                              ``[[x, y], ...]`` or an object      :mod:`.points`
 ``.svg``                               the first path, polygon, etc.       :mod:`.svg`
-``.png`` ``.tif`` ``.tiff`` ``.jpg``   one object's outer contour          :mod:`.images`
+``.png`` ``.tif`` ``.tiff`` ``.jpg``   one object's contours (and holes)   :mod:`.images`
 ``.jpeg`` ``.bmp``
 ``.ply`` ``.obj`` ``.stl`` ``.off``    a triangle surface or point cloud   :mod:`.meshes`
 ``.vtk`` ``.vtu`` ``.msh`` ``.mesh``
+``.nii`` ``.nii.gz``                   a label slice (2D or 2D+t), in mm   :mod:`.nifti`
 =====================================  ==================================  ==============
 
 Each module's docstring says what it reads, in detail. SVG and images need svgelements,
-scikit-image and pillow, meshes meshio (dependencies of modalmorph, imported when read).
+scikit-image and pillow, meshes meshio (dependencies of modalmorph, imported when read);
+NIfTI needs nibabel (optional: ``pip install 'modalmorph[nifti]'``).
 The other modules: :mod:`.sequences` (the frames of :func:`read_frames`), :mod:`.results`
 (:func:`save_result`, :func:`save_track`), :mod:`.atomic` (atomic output, used by every
 writer), :mod:`.vtk` (:func:`write_vtk_series`), :mod:`.gltf` (:func:`write_gltf`: an
@@ -67,17 +69,26 @@ from .base import (
     UNEVEN_SPACING,
     RawShape,
     Reader,
+    extension,
     make_shape,
     uneven_nodes,
     y_down,
 )
 from .gltf import write_gltf
 from .guard import READ_SECONDS, guarded, read_guarded
-from .images import INSIDE_FRACTION, MAX_PARTIAL_ALPHA, MIN_OBJECT_PIXELS, read_image
+from .images import (
+    INSIDE_FRACTION,
+    MAX_PARTIAL_ALPHA,
+    MIN_HOLE_AREA,
+    MIN_OBJECT_PIXELS,
+    mask_shape,
+    read_image,
+)
 from .meshes import read_mesh
+from .nifti import read_nifti
 from .points import read_json, read_npy, read_npz, read_text, write_points
 from .results import result_summary, save_result, save_track
-from .sequences import Frames, file_frames, sequence_files
+from .sequences import Frames, check_grids, file_frames, sequence_files
 from .steps import MESH_FORMATS, write_step_meshes
 from .svg import SVG_FRAME, read_svg
 from .vtk import write_vtk_series
@@ -87,6 +98,7 @@ __all__ = [
     "Frames",
     "INSIDE_FRACTION",
     "MAX_PARTIAL_ALPHA",
+    "MIN_HOLE_AREA",
     "MESH_FORMATS",
     "MIN_OBJECT_PIXELS",
     "OUTPUT_MARKER",
@@ -99,6 +111,7 @@ __all__ = [
     "UNEVEN_SPACING",
     "atomic_output_dir",
     "atomic_write",
+    "mask_shape",
     "read_frames",
     "read_shape",
     "remove_leftovers",
@@ -119,7 +132,7 @@ READERS: dict[str, Reader] = {
     ".json": read_json,
     ".svg": read_svg,
     ".png": read_image, ".tif": read_image, ".tiff": read_image, ".jpg": read_image,
-    ".jpeg": read_image, ".bmp": read_image,
+    ".jpeg": read_image, ".bmp": read_image, ".nii": read_nifti, ".nii.gz": read_nifti,
     ".ply": read_mesh, ".obj": read_mesh, ".stl": read_mesh, ".off": read_mesh,
     ".vtk": read_mesh, ".vtu": read_mesh, ".msh": read_mesh, ".mesh": read_mesh,
 }
@@ -177,17 +190,33 @@ def read_shape(path, options: ReadOptions | None = None, *, closed: bool | None 
     raw = read_guarded(_reader(path, name, opts), path, name, opts)
     if closed is None:
         closed = True if raw.closed is None else raw.closed
-    pts = raw.points
-    if raw.drop_closing_repeat and raw.faces is None and len(pts) > 1 and np.array_equal(
-            pts[0], pts[-1]):
-        pts = pts[:-1]  # a closed contour written with its first node repeated
+    pts, contours = raw.points, raw.contours
+    if raw.drop_closing_repeat and raw.faces is None:
+        pts, contours = _drop_closing_repeats(pts, contours)
     frame = raw.frame
     if opts.flip_y and frame is None and pts.ndim == 2 and pts.shape[1] == 2:
         pts, frame = pts * [1.0, -1.0], FLIPPED_FRAME  # y up -> image coordinates
     nodes = opts.nodes or raw.default_nodes
     if nodes is None and raw.faces is None:
-        nodes = uneven_nodes(name, pts, closed)
-    return make_shape(name, pts, faces=raw.faces, nodes=nodes, closed=closed, frame=frame)
+        nodes = uneven_nodes(name, pts, closed, contours)
+    return make_shape(name, pts, faces=raw.faces, nodes=nodes, closed=closed, frame=frame,
+                      contours=contours)
+
+
+def _drop_closing_repeats(pts: np.ndarray, contours) -> tuple[np.ndarray, tuple | None]:
+    """Each contour's last node dropped where it repeats its first (written closed)."""
+    sizes = contours or (len(pts),)
+    ends = np.cumsum(sizes)
+    keep = np.ones(len(pts), dtype=bool)
+    for k, end in zip(sizes, ends, strict=True):
+        if k > 1 and end <= len(pts) and np.array_equal(pts[end - k], pts[end - 1]):
+            keep[end - 1] = False
+    if keep.all():
+        return pts, contours
+    if contours is None:
+        return pts[keep], None
+    return pts[keep], tuple(int(np.count_nonzero(keep[e - k:e])) for k, e in zip(
+        sizes, ends, strict=True))
 
 
 def _read_options(options: ReadOptions | None, overrides: dict) -> ReadOptions:
@@ -206,13 +235,13 @@ def _reader(path: Path, name: str, options: ReadOptions) -> Reader:
         raise InputFileError(f"{name}: no such file")
     if path.is_dir():
         raise InputFileError(f"{name}: is a directory, not a file")
-    ext = path.suffix.lower()
+    ext = extension(path)
     if ext not in READERS:
         raise InputFileError(f"{name}: unknown file extension {path.suffix!r}; supported: "
                              f"{', '.join(SUPPORTED_EXTENSIONS)}")
     if path.stat().st_size == 0:
         raise InputFileError(f"{name}: the file is empty")
-    if options.threshold is not None and READERS[ext] is not read_image:
+    if options.threshold is not None and READERS[ext] not in (read_image, read_nifti):
         raise InputFileError(f"{name}: threshold= applies to images only, not {ext} files")
     return READERS[ext]
 
@@ -229,6 +258,8 @@ def read_frames(inputs, options: ReadOptions | None = None, **overrides) -> Fram
           order (``frame2`` before ``frame10``);
         - a glob pattern (``"masks/*.png"``), in natural order;
         - a multi-page TIFF: one mask or grey image per page;
+        - a NIfTI file (``.nii``, ``.nii.gz``) of a 2D+t label volume, in mm (see
+          :mod:`.nifti`);
         - an ``.npy`` file, or an ``.npz`` file's ``points`` (or only) array: an
           (F, n, d) array of F shapes of n nodes (d = 2 or 3), or an (F, H, W) stack of
           masks or grey images;
@@ -249,8 +280,9 @@ def read_frames(inputs, options: ReadOptions | None = None, **overrides) -> Fram
     Raises
     ------
     InputFileError
-        When an input cannot be read, gives fewer than 2 frames, or a frame is not a valid
-        shape; the message starts with the frame's name (file, page or index).
+        When an input cannot be read, gives fewer than 2 frames, a frame is not a valid
+        shape, or frames read from images differ in size or (NIfTI) pixel spacing; the
+        message starts with the frame's name (file, page or index).
     OptionError
         If an option is unknown or out of range.
     """
@@ -259,10 +291,11 @@ def read_frames(inputs, options: ReadOptions | None = None, **overrides) -> Fram
     if not paths:
         raise InputFileError("inputs: no file given")
     if len(paths) == 1:
-        names, shapes = _frames_of(paths[0], opts)
+        names, shapes, files = _frames_of(paths[0], opts)
     else:
-        names = [os.fspath(p) for p in paths]
+        names = files = [os.fspath(p) for p in paths]
         shapes = [read_shape(p, opts) for p in paths]
+    check_grids(names, shapes, files)
     if len(shapes) < 2:
         raise InputFileError(f"{names[0] if names else os.fspath(paths[0])}: a sequence "
                              f"needs at least 2 frames, got {len(shapes)}")
@@ -270,10 +303,12 @@ def read_frames(inputs, options: ReadOptions | None = None, **overrides) -> Fram
 
 
 def _frames_of(path, options: ReadOptions) -> tuple[list, list]:
-    """(names, shapes) of the frames of one input: a pattern, a folder or a file."""
+    """(names, shapes, files) of the frames of one input: a pattern, a folder (a file per
+    frame) or a file (``files`` None)."""
     files = sequence_files(path, SUPPORTED_EXTENSIONS)
     if files is not None:
-        return [os.fspath(f) for f in files], [read_shape(f, options) for f in files]
+        names = [os.fspath(f) for f in files]
+        return names, [read_shape(f, options) for f in files], names
     size = Path(path).stat().st_size if Path(path).is_file() else 0
     with guarded(os.fspath(path), size):  # a file of several frames: read as read_shape's
-        return file_frames(path, options, read_shape)
+        return (*file_frames(path, options, read_shape), None)

@@ -10,12 +10,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.shape import ImageFrame, Shape, resample
+from ..core.shape import ImageFrame, Shape, resample, share
 from ..errors import InputFileError
 from ..options import ReadOptions
 
 __all__ = ["DEFAULT_NODES", "FLIPPED_FRAME", "RawShape", "Reader", "UNEVEN_SPACING",
-           "make_shape", "uneven_nodes", "y_down"]
+           "extension", "make_shape", "uneven_nodes", "y_down"]
 
 _log = logging.getLogger(__name__)
 
@@ -30,13 +30,20 @@ UNEVEN_SPACING = 4.0
 FLIPPED_FRAME = ImageFrame(unit="input units (y mirrored)", y_down=True)
 
 
+def extension(path) -> str:
+    """A file's extension, lower case, the two of a compressed NIfTI file (``.nii.gz``)
+    together."""
+    name = Path(path).name.lower()
+    return ".nii.gz" if name.endswith(".nii.gz") else Path(name).suffix
+
+
 def y_down(shape) -> bool:
     """Whether a shape's y points down (images, SVG, ``flip_y``) rather than up."""
     frame = getattr(shape, "frame", None)
     return frame is not None and frame.y_down
 
 
-def uneven_nodes(name: str, pts: np.ndarray, closed: bool) -> int | None:
+def uneven_nodes(name: str, pts: np.ndarray, closed: bool, contours=None) -> int | None:
     """Nodes to resample an unevenly spaced 2D contour to (logged), or None to keep it.
 
     ``max(DEFAULT_NODES, m)`` when the longest edge exceeds :data:`UNEVEN_SPACING` times
@@ -44,9 +51,11 @@ def uneven_nodes(name: str, pts: np.ndarray, closed: bool) -> int | None:
     """
     if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 3 or not np.isfinite(pts).all():
         return None  # make_shape says what is wrong
-    path = np.vstack([pts, pts[:1]]) if closed else pts
+    ends = np.cumsum(contours or (len(pts),))
+    if ends[-1] != len(pts):
+        return None  # make_shape says what is wrong
     with np.errstate(over="ignore", invalid="ignore"):  # absurd sizes: Shape refuses them
-        edges = np.linalg.norm(np.diff(path, axis=0), axis=1)
+        edges = np.concatenate([_edge_lengths(p, closed) for p in np.split(pts, ends[:-1])])
     median = float(np.median(edges))
     if not np.isfinite(edges).all() or median <= 0 or edges.max() <= UNEVEN_SPACING * median:
         return None
@@ -55,6 +64,11 @@ def uneven_nodes(name: str, pts: np.ndarray, closed: bool) -> int | None:
               "to %d nodes equally spaced by arc length (nodes=N for another count)",
               name, edges.max() / median, len(pts), nodes)
     return nodes
+
+
+def _edge_lengths(pts: np.ndarray, closed: bool) -> np.ndarray:
+    path = np.vstack([pts, pts[:1]]) if closed else pts
+    return np.linalg.norm(np.diff(path, axis=0), axis=1)
 
 
 @dataclass(frozen=True)
@@ -77,6 +91,9 @@ class RawShape:
     drop_closing_repeat : bool
         Whether a last node repeating the first (a contour written closed) is dropped;
         False for a mesh's points.
+    contours : tuple of int, optional
+        Node counts of several contours in row order (an object's outer boundary then its
+        holes; the subpaths of an SVG path); None: one contour.
     """
 
     points: np.ndarray
@@ -85,14 +102,17 @@ class RawShape:
     frame: ImageFrame | None = None
     default_nodes: int | None = None
     drop_closing_repeat: bool = True
+    contours: tuple[int, ...] | None = None
 
 
 # A reader: (the file, its name as given, the read options) -> what the file holds.
 Reader = Callable[[Path, str, ReadOptions], RawShape]
 
 
-def make_shape(name, pts, *, faces=None, nodes=None, closed=True, frame=None) -> Shape:
-    """Check an (m, d) array of coordinates from ``name``; resample; build the Shape."""
+def make_shape(name, pts, *, faces=None, nodes=None, closed=True, frame=None,
+               contours=None) -> Shape:
+    """Check an (m, d) array of coordinates from ``name``; resample (``nodes`` shared among
+    ``contours`` by length, :func:`~modalmorph.core.shape.share`); build the Shape."""
     pts = np.asarray(pts, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] not in (2, 3):
         raise InputFileError(f"{name}: expected an (m, 2) or (m, 3) array of coordinates, "
@@ -107,13 +127,26 @@ def make_shape(name, pts, *, faces=None, nodes=None, closed=True, frame=None) ->
     if len(bad):
         raise InputFileError(f"{name}: node {bad[0]} has non-finite coordinates "
                              f"{pts[bad[0]].tolist()} ({len(bad)} such node(s))")
-    if nodes is not None:
-        if pts.shape[1] != 2 or faces is not None:
-            raise InputFileError(f"{name}: nodes= resamples 2D contours; this is a "
-                                 f"{pts.shape[1]}D "
-                                 f"{'surface' if faces is not None else 'point set'}")
-        pts = resample(pts, int(nodes), closed=bool(closed))
+    if nodes is not None and (pts.shape[1] != 2 or faces is not None):
+        raise InputFileError(f"{name}: nodes= resamples 2D contours; this is a "
+                             f"{pts.shape[1]}D "
+                             f"{'surface' if faces is not None else 'point set'}")
     try:
-        return Shape(pts, closed=bool(closed), faces=faces, frame=frame)
+        if nodes is not None:
+            pts, contours = _resampled(pts, int(nodes), bool(closed), contours)
+        return Shape(pts, closed=bool(closed), faces=faces, frame=frame, contours=contours)
     except ValueError as exc:
         raise InputFileError(f"{name}: {exc}") from None
+
+
+def _resampled(pts, nodes: int, closed: bool, contours) -> tuple[np.ndarray, tuple | None]:
+    """Every contour resampled by arc length, ``nodes`` shared among them by length."""
+    if contours is None or len(contours) == 1:
+        return resample(pts, nodes, closed=closed), None
+    whole = Shape(pts, closed=closed, contours=contours)
+    dense = [resample(pts[r], nodes, closed=closed) for r in whole.slices]  # share caps a
+    counts = share(Shape(np.vstack(dense), closed=closed,  # contour's count at its nodes
+                         contours=(nodes,) * len(dense)), nodes)
+    parts = [resample(pts[r], c, closed=closed)
+             for r, c in zip(whole.slices, counts, strict=True)]
+    return np.vstack(parts), tuple(counts)

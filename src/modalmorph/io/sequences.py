@@ -19,11 +19,12 @@ import numpy as np
 from ..core.shape import ImageFrame, Shape
 from ..errors import InputFileError
 from ..options import ReadOptions
-from .base import DEFAULT_NODES, make_shape
-from .images import grey_levels, image_contour
+from .base import DEFAULT_NODES, extension, make_shape
+from .images import grey_levels, image_contours
+from .nifti import NIFTI_EXTENSIONS, nifti_frames, nifti_grid
 from .points import TEXT_SEPARATORS, load_npy, npz_arrays, parse_float
 
-__all__ = ["Frames", "file_frames", "natural_key", "sequence_files"]
+__all__ = ["Frames", "check_grids", "file_frames", "natural_key", "sequence_files"]
 
 # The files that may hold several frames (by extension); any other is one frame.
 _STACKS = (".npy", ".npz")
@@ -66,7 +67,7 @@ def sequence_files(path, extensions) -> list | None:
     if not path.is_dir():
         return None
     files = sorted((p for p in path.iterdir() if p.is_file() and not p.name.startswith(".")
-                    and p.suffix.lower() in extensions), key=natural_key)
+                    and extension(p) in extensions), key=natural_key)
     if not files:
         raise InputFileError(f"{name}: no shape file in the folder (extensions: "
                              f"{', '.join(extensions)})")
@@ -78,10 +79,16 @@ def file_frames(path, options: ReadOptions,
     """(names, shapes) of the frames in one file; ``read`` reads a file of one frame."""
     name = os.fspath(path)
     path = Path(path)
-    ext = path.suffix.lower()
+    ext = extension(path)
     if not path.exists() or path.stat().st_size == 0 or ext not in (*_STACKS, *_TABLES,
-                                                                    *_PAGED):
+                                                                    *_PAGED,
+                                                                    *NIFTI_EXTENSIONS):
         return [name], [read(path, options)]
+    if ext in NIFTI_EXTENSIONS:
+        frames = nifti_frames(path, name, options)
+        return [n for n, _ in frames], [
+            make_shape(n, raw.points, nodes=options.nodes or raw.default_nodes,
+                       frame=raw.frame, contours=raw.contours) for n, raw in frames]
     if ext in _PAGED:
         pages = _tiff_pages(path, name)
         if len(pages) == 1:
@@ -105,6 +112,30 @@ def file_frames(path, options: ReadOptions,
     return _image_frames(list(array), f"{name}[{{}}]", options)
 
 
+def check_grids(names, shapes, files=None) -> None:
+    """InputFileError naming the first frame whose image size (or, for NIfTI files among
+    ``files``, pixel spacing) differs from the first image frame's: the frames of a
+    sequence share one pixel grid, or their coordinates do not compare."""
+    grids = []  # (name, size, spacing) of the frames read from an image
+    for k, shape in enumerate(shapes):
+        size = getattr(shape.frame, "size", None)
+        if size is not None:
+            nifti = files is not None and extension(files[k]) in NIFTI_EXTENSIONS
+            grids.append((names[k], size, nifti_grid(Path(files[k]), names[k])[1] if nifti
+                          else None))
+    for name, size, spacing in grids[1:]:
+        first, size0, spacing0 = grids[0]
+        if size != size0:
+            raise InputFileError(f"{name}: the image is {size[1]} x {size[0]} px, the first "
+                                 f"frame ({first}) {size0[1]} x {size0[0]} px: the frames of "
+                                 f"a sequence share one pixel grid")
+        if spacing != spacing0:
+            raise InputFileError(f"{name}: pixel spacing {spacing[0]:g} x {spacing[1]:g}, "
+                                 f"the first frame ({first}) {spacing0[0]:g} x "
+                                 f"{spacing0[1]:g}: the frames of a sequence share one pixel "
+                                 f"grid")
+
+
 def _tiff_pages(path: Path, name: str) -> list:
     from PIL import Image, ImageSequence
 
@@ -121,9 +152,10 @@ def _image_frames(images, pattern: str, options: ReadOptions):
     names = [pattern.format(f) for f in range(len(images))]
     shapes = []
     for n, g in zip(names, map(np.asarray, images), strict=True):
-        pts = image_contour(g, n, options.threshold, options.object)
-        shapes.append(make_shape(n, pts, nodes=options.nodes or DEFAULT_NODES,
-                                 frame=ImageFrame(size=g.shape)))
+        parts = image_contours(g, n, options)
+        shapes.append(make_shape(n, np.vstack(parts), nodes=options.nodes or DEFAULT_NODES,
+                                 frame=ImageFrame(size=g.shape),
+                                 contours=tuple(map(len, parts)) if len(parts) > 1 else None))
     return names, shapes
 
 

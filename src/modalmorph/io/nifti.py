@@ -1,0 +1,126 @@
+"""NIfTI-1/2 label volumes (``.nii``, ``.nii.gz``): a 2D slice or a 2D+t sequence of masks,
+in millimetres. Needs nibabel, an optional dependency (``pip install 'modalmorph[nifti]'``).
+
+Array shapes: (X, Y) or (X, Y, 1) is one frame; (X, Y, 1, T) and (X, Y, T) are T frames
+of one slice (a third axis is read as time: a 2D shape comes from one slice, not from a
+3D volume); (X, Y, Z, T) with Z > 1 is refused. Each frame is read as an image
+(:mod:`.images`): a two-level mask, a label image with ``label`` (segmentations: ACDC's
+myocardium is 2) or grey levels with ``threshold``.
+
+The frame: voxel ``(i, j)`` (the first two array axes) is at ``(x, y) = (i * dx, j * dy)``
+where ``(dx, dy)`` are the header's first two zooms (pixel spacing), in the header's
+spatial unit (mm when it names none). The affine's origin and direction cosines are not
+applied: x runs along the first voxel axis, y along the second, drawn y down as image rows
+(the slice as ``data[:, :, t].T``, its first row at the top); the voxel axes' anatomical
+directions (nibabel's ``aff2axcodes``, e.g. ``('R', 'A', 'S')``) are logged.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from ..core.shape import ImageFrame
+from ..errors import InputFileError
+from ..options import ReadOptions
+from .base import DEFAULT_NODES, RawShape
+from .images import image_contours
+
+__all__ = ["NIFTI_EXTENSIONS", "nifti_frames", "nifti_grid", "read_nifti"]
+
+NIFTI_EXTENSIONS = (".nii", ".nii.gz")
+
+_log = logging.getLogger(__name__)
+
+
+def read_nifti(path: Path, name: str, options: ReadOptions) -> RawShape:
+    """The contours of the chosen object of a one-frame NIfTI file, in its spatial unit."""
+    slices, spacing, unit = _slices(path, name)
+    if len(slices) > 1:
+        raise InputFileError(f"{name}: a 2D+t volume of {len(slices)} frames: read it as a "
+                             f"sequence (read_frames, modalmorph track)")
+    pts, contours = _contours(slices[0], name, options, spacing)
+    return RawShape(pts, frame=_frame(unit, slices[0]), default_nodes=DEFAULT_NODES,
+                    contours=contours)
+
+
+def nifti_frames(path: Path, name: str, options: ReadOptions) -> list[tuple[str, RawShape]]:
+    """``(frame name, RawShape)`` of each frame of a NIfTI file (one for a 2D file)."""
+    slices, spacing, unit = _slices(path, name)
+    if len(slices) == 1:
+        return [(name, read_nifti(path, name, options))]
+    out = []
+    for t, grey in enumerate(slices):
+        frame_name = f"{name}[frame {t}]"
+        pts, contours = _contours(grey, frame_name, options, spacing)
+        out.append((frame_name, RawShape(pts, frame=_frame(unit, grey),
+                                         default_nodes=DEFAULT_NODES, contours=contours)))
+    return out
+
+
+def nifti_grid(path: Path, name: str) -> tuple[tuple[int, int], tuple[float, float]]:
+    """``((X, Y), (dx, dy))``: a NIfTI file's slice size and pixel spacing, from its header
+    alone (for checking that the frames of a sequence share one grid)."""
+    image = _load(path, name)
+    return tuple(int(n) for n in image.shape[:2]), _spacing(image, name)
+
+
+def _load(path: Path, name: str):
+    try:
+        import nibabel
+    except ImportError:
+        raise InputFileError(f"{name}: reading NIfTI files needs nibabel; install it with: "
+                             f"pip install 'modalmorph[nifti]'") from None
+    try:
+        return nibabel.load(path)
+    except (OSError, ValueError, EOFError, nibabel.filebasedimages.ImageFileError) as exc:
+        raise InputFileError(f"{name}: cannot read the NIfTI file: {exc}") from None
+
+
+def _spacing(image, name: str) -> tuple[float, float]:
+    zooms = tuple(float(f"{z:.7g}") for z in image.header.get_zooms()[:2])  # float32
+    if len(zooms) < 2 or not all(np.isfinite(z) and z > 0 for z in zooms):
+        raise InputFileError(f"{name}: the header's pixel spacing must be two positive "
+                             f"numbers, got {zooms}")
+    return zooms
+
+
+def _slices(path: Path, name: str) -> tuple[list[np.ndarray], tuple[float, float], str]:
+    """The frames (H, W) = (Y, X) of a NIfTI file, its pixel spacing and spatial unit."""
+    image = _load(path, name)
+    shape = image.shape
+    if len(shape) < 2 or len(shape) > 4 or (len(shape) == 4 and shape[2] != 1):
+        raise InputFileError(f"{name}: expected a 2D slice (X, Y), (X, Y, T) or (X, Y, 1, T), "
+                             f"got an array of shape {shape}")
+    spacing = _spacing(image, name)
+    unit = image.header.get_xyzt_units()[0]
+    unit = unit if unit != "unknown" else "mm (the header names no unit)"
+    try:
+        import nibabel
+
+        axes = "".join(nibabel.aff2axcodes(image.affine)[:2])
+        data = np.asanyarray(image.dataobj)
+    except (OSError, ValueError, EOFError, MemoryError) as exc:
+        raise InputFileError(f"{name}: cannot read the NIfTI data: {exc}") from None
+    data = data.reshape(shape[0], shape[1], -1)  # (X, Y, frames)
+    _log.info("%s: %d frame(s) of %d x %d voxels, spacing %g x %g %s, voxel axes towards %s",
+              name, data.shape[2], shape[0], shape[1], *spacing, unit, axes)
+    return [data[:, :, t].T for t in range(data.shape[2])], spacing, _unit(unit)
+
+
+def _unit(unit: str) -> str:
+    return {"micron": "µm", "meter": "m"}.get(unit, unit.split()[0])
+
+
+def _contours(grey: np.ndarray, name: str, options: ReadOptions, spacing):
+    """Every boundary of the chosen object, scaled from voxels to the spatial unit."""
+    if grey.dtype == bool:
+        grey = grey.astype(np.uint8)
+    parts = [p * spacing for p in image_contours(grey, name, options)]  # (i, j) -> mm
+    return np.vstack(parts), tuple(map(len, parts)) if len(parts) > 1 else None
+
+
+def _frame(unit: str, grey: np.ndarray) -> ImageFrame:
+    return ImageFrame(unit=unit, size=grey.shape, y_down=True)
