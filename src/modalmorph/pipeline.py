@@ -32,22 +32,26 @@ docs/method.md:
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from .core.align import Similarity, align
-from .core.quality import check_simple
+from .core.quality import check_contours
 from .core.shape import Shape, as_shape
 from .core.surfaces import intersection_sentence, step_self_intersections
 from .errors import MorphDivergedError, OptionError, ShapeError
 from .matching import Matching, match
+from .matching.contours import unpaired_sentence
 from .options import MatchOptions, MorphOptions, split_overrides
 from .simulation import SPARSE_MODES, Run, Simulation
 from .threads import limit
 
 __all__ = ["Morph", "MorphDivergedError", "morph", "SPARSE_MODES"]
+
+log = logging.getLogger(__name__)
 
 
 
@@ -84,6 +88,11 @@ class Morph(Run):
     options: MorphOptions
     match_options: MatchOptions | None = None
     self_intersections: np.ndarray | None = None
+
+    def shape(self, step: int = -1) -> Shape:
+        """The shape at ``step`` (the last by default): the source's topology (contours,
+        faces) on the nodes of ``shapes[step]``."""
+        return self.source.with_points(self.shapes[step])
 
 
 def morph(source, target, *, matching=None, options: MorphOptions | None = None,
@@ -139,7 +148,7 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
     if given:  # match() checks the contours of what it matches
         for name, shape in (("source", src), ("target", tgt)):
             if shape.dim == 2 and shape.ordered:
-                check_simple(shape.points, name, shape.closed)
+                check_contours(shape, name)
     with limit(max(src.m, tgt.m)):
         if not given:
             matching = match(src, tgt, options=match_options)
@@ -148,15 +157,29 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
         if options.remove_rigid:  # section 5.2: Horn's similarity from the matched pairs
             similarity = align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]], scale=True)
             work = src.with_points(similarity.apply(src.points))
-        run = Simulation(work, tgt, pairs, options).run(progress).result()
+        sim = Simulation(work, tgt, pairs, options, matching.contours)
+        run = sim.run(progress).result()
     crossed = None
     if src.dim == 3 and src.faces is not None and len(src.faces):
         crossed = step_self_intersections(run.shapes, src.faces)
     said = intersection_sentence(crossed, model_nodes=run.resolved.model_nodes, nodes=src.m)
+    if sim.system.partners is not None:
+        said += _unpaired(src, tgt, sim.system.partners)
     fields = {**vars(run), "message": run.message + said}
     return Morph(**fields, matching=matching, similarity=similarity, source=src,
                  target=tgt, options=options, match_options=match_options,
                  self_intersections=crossed)
+
+
+def _unpaired(src: Shape, tgt: Shape, partners: np.ndarray) -> str:
+    """The message's sentence on contours without a partner ('' when none), logged."""
+    said = unpaired_sentence(src, tgt, partners, (
+        "moved with its nearest pulled nodes, not measured by the stop test",
+        "not measured by the stop test"))
+    if said:
+        log.info("morph: %s", said)
+        return "; " + said
+    return ""
 
 
 def _options(options, matching, overrides: dict) -> tuple[MorphOptions, MatchOptions]:

@@ -19,10 +19,11 @@ from functools import partial
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .core.quality import curve_distances, self_crossings
+from .core.quality import area, crossing_segments, curve_distances, self_crossings
 from .core.shape import Shape, as_shape
 from .errors import MorphDivergedError, OptionError, ShapeError
 from .matching import match
+from .matching.contours import pair_contours
 from .options import (
     CORRESPONDENCES,
     REFERENCES,
@@ -51,7 +52,8 @@ class Track:
         Tracked nodes: row ``i`` of every frame is the same material node ``i`` of frame 0,
         in the user's units. ``points[0]`` is frame 0 itself.
     frames : tuple of Shape
-        The observed objects (2D contours oriented like frame 0).
+        The observed objects (2D contours oriented like frame 0; the contours of each
+        frame of several contours in the order of their partners in frame 0).
     names : tuple of str
         A name per frame (file name, or ``"frame <i>"``), used in messages.
     morphs : tuple of Morph
@@ -66,25 +68,33 @@ class Track:
     cumulative_energy : ndarray, shape (F,)
         ``cumsum(energy)``: the energy spent along the sequence up to each frame.
     edges : ndarray of int, shape (e, 2)
-        The stretches between nodes whose strain is measured (contour edges, or the edges
-        of a surface's triangles; none for point clouds).
+        The stretches between nodes whose strain is measured (:attr:`Shape.edges` of
+        frame 0: the edges of each contour, or of a surface's triangles; none for point
+        clouds).
     edge_strain : ndarray, shape (F, e)
         Relative change of length of every edge against frame 0, ``l_f / l_0 - 1``:
         negative when the stretch shortens.
     strain : ndarray, shape (F,)
         Global strain: relative change of the summed edge length (the perimeter of a
         closed contour: global circumferential strain of a left ventricle).
-    segment_strain : ndarray, shape (F, S)
+    segment_strain : ndarray, shape (F, S) or (F, P * S)
         Strain of ``S`` segments of equal arc length on frame 0, the first starting at
         ``start_node`` and following the node order (e.g. the 6 segments of a
-        left-ventricle slice); ``(F, 0)`` for unordered objects.
+        left-ventricle slice); ``(F, 0)`` for unordered objects. Objects of ``P``
+        contours (a myocardium ring): ``S`` segments per contour, columns
+        ``k S .. k S + S - 1`` for contour ``k``; the contour of ``start_node`` starts
+        there, every other contour at its node nearest in angle about frame 0's
+        centroid, numbered the way the first runs round, so that segment ``s`` of the
+        endocardium and of the epicardium cover about the same sector.
     segment_of_edge : ndarray of int, shape (e,)
         The segment each edge belongs to (-1 for none).
     distance : ndarray, shape (F,)
         Two-way distance of the tracked shape to the observed object of its frame
-        (:func:`curve_distance`), in the user's units.
+        (:func:`curve_distance`, contour by contour for several contours), in the user's
+        units.
     crossed : ndarray of bool, shape (F,)
-        Whether a tracked 2D contour crosses itself at that frame.
+        Whether a tracked 2D contour crosses itself (or, for several contours, one
+        crosses another) at that frame.
     closure : Morph or None
         With ``cycle=True``: the morph of the last tracked frame back onto frame 0.
     closure_error : float or None
@@ -142,7 +152,11 @@ def track(frames, *, options: TrackOptions | None = None,
     ----------
     frames : sequence of Shape or array_like (n_f, d)
         At least 2 objects in time order, all 2D or all 3D, in one common frame of
-        reference (the images' coordinates); node counts may differ.
+        reference (the images' coordinates); node counts may differ. Shapes of several
+        contours (a myocardium ring) need as many contours in every frame; each frame's
+        contours are paired with frame 0's by distance in that common frame, and every
+        node stays on its partner contour (``correspondence="nearest"`` pairs within
+        partners; ``"modal"`` matches partners, :func:`modalmorph.match`).
     options : TrackOptions, optional
         How the sequence is followed (reference, correspondence, cycle, segments).
     names : sequence of str, optional
@@ -212,7 +226,7 @@ def _morph_frame(source: Shape, target: Shape, f: int, *, names: tuple,
     """One frame's morph: pairs (nearest, or modal with ``match_options``), then
     :func:`modalmorph.morph`; errors name the frame."""
     try:
-        pairs = (_nearest_pairs(source.normalized, target.normalized)
+        pairs = (_nearest_pairs_per_contour(source, target)
                  if match_options is None else match(source, target, options=match_options))
         return morph(source, target, matching=pairs, options=morph_options)
     except (ValueError, MorphDivergedError) as exc:
@@ -262,7 +276,10 @@ def _frames(frames, names, start_node) -> tuple[list, tuple]:
             raise ShapeError(f"frame {f} ({names[f]}) is {shape.dim}D but frame 0 "
                              f"({names[0]}) is {first.dim}D: all frames must have the "
                              f"same dimension")
-        shapes[f] = _oriented(shape, first)
+        try:
+            shapes[f] = _oriented(shape, first)
+        except ShapeError as exc:
+            raise ShapeError(f"frame {f} ({names[f]}): {exc}") from None
     return shapes, names
 
 
@@ -271,10 +288,10 @@ def _result(shapes, names, points, morphs, closure, params) -> Track:
     first = shapes[0]
     energy = np.r_[0.0, [r.energy[-1] for r in morphs]]
     node_energy = np.vstack([np.zeros(first.m), *[r.node_energy[-1] for r in morphs]])
-    edges = _edges(first)
+    edges = first.edges
     lengths = np.linalg.norm(points[:, edges[:, 1]] - points[:, edges[:, 0]], axis=2)
-    n_seg = params["segments"]
-    seg = _segment_of_edge(first, edges, max(n_seg, 1), params["start_node"])
+    n_seg = params["segments"] * len(first.sizes)  # per contour
+    seg = _segment_of_edge(first, edges, max(params["segments"], 1), params["start_node"])
     seg_len = np.stack([lengths[:, seg == s].sum(axis=1) for s in range(n_seg)], axis=1) \
         if n_seg else np.zeros((len(points), 0))
     closure_error = None if closure is None else float(
@@ -302,7 +319,10 @@ def _frame(obj, f: int, names: tuple) -> Shape:
 
 def _oriented(shape: Shape, first: Shape) -> Shape:
     """A 2D contour turned to run the same way round as frame 0 (the sign of its area),
-    so the morph's rule for unmatched nodes walks both in the same direction."""
+    so the morph's rule for unmatched nodes walks both in the same direction; several
+    contours: each ordered and turned like its partner of frame 0 (:func:`_like_first`)."""
+    if shape is not first and (shape.contours or first.contours):
+        return _like_first(shape, first)
     if shape.dim != 2 or not shape.ordered or not shape.closed or shape is first:
         return shape
     if np.sign(_area(shape.points)) == np.sign(_area(first.points)):
@@ -310,9 +330,39 @@ def _oriented(shape: Shape, first: Shape) -> Shape:
     return shape.with_points(shape.points[::-1])
 
 
+def _like_first(shape: Shape, first: Shape) -> Shape:
+    """A frame of several contours with its contours in the order of their partners in
+    frame 0 (:func:`~modalmorph.matching.contours.pair_contours` in the frames' common
+    frame) and, closed 2D ones, running the same way round as them."""
+    if len(shape.sizes) != len(first.sizes) or not shape.ordered:
+        count = len(shape.sizes)
+        raise ShapeError(f"it has {count or 'no'} contour{'' if count == 1 else 's'} but "
+                         f"frame 0 has {len(first.sizes)}: the frames of a sequence of "
+                         "several contours must have as many contours")
+    partner = pair_contours(first, shape)[:, 1]
+    pieces = []
+    for k, j in enumerate(partner):
+        p = shape.points[shape.slices[j]]
+        turn = shape.dim == 2 and shape.closed and (
+            np.sign(area(p)) != np.sign(area(first.points[first.slices[k]])))
+        pieces.append(p[::-1] if turn else p)
+    return Shape(np.vstack(pieces), closed=shape.closed, frame=shape.frame,
+                 contours=tuple(len(p) for p in pieces))
+
+
 def _area(p: np.ndarray) -> float:
     return 0.5 * float(np.dot(p[:, 0], np.roll(p[:, 1], -1))
                        - np.dot(p[:, 1], np.roll(p[:, 0], -1)))
+
+
+def _nearest_pairs_per_contour(source: Shape, target: Shape) -> np.ndarray:
+    """:func:`_nearest_pairs` of the normalised objects; for objects of several contours
+    (the frames' contours in frame 0's order), within each contour and its partner."""
+    x, y = source.normalized, target.normalized
+    if not source.contours:
+        return _nearest_pairs(x, y)
+    return np.vstack([_nearest_pairs(x[a], y[b]) + [a.start, b.start]
+                      for a, b in zip(source.slices, target.slices, strict=True)])
 
 
 def _nearest_pairs(current: np.ndarray, observed: np.ndarray) -> np.ndarray:
@@ -326,28 +376,16 @@ def _nearest_pairs(current: np.ndarray, observed: np.ndarray) -> np.ndarray:
     return np.c_[keep, j[keep]]
 
 
-def _edges(shape: Shape) -> np.ndarray:
-    """Stretches whose strain is measured: contour edges, or the triangles' edges."""
-    m = shape.m
-    if shape.faces is not None:
-        e = np.sort(shape.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-        return np.unique(e, axis=0)
-    if not shape.ordered:
-        return np.zeros((0, 2), dtype=np.intp)
-    i = np.arange(m if shape.closed else m - 1)
-    return np.c_[i, (i + 1) % m]
-
-
 def _check_segments(first: Shape, name: str, opts: TrackOptions) -> None:
     """An :class:`OptionError` naming ``segments`` when a segment of frame 0 would hold
     no edge (its strain would be 0/0), before any morph is computed."""
     if not first.ordered or first.faces is not None:
         return  # no segments: the strain table is empty
-    edges = _edges(first)
+    edges = first.edges
 
     def fits(n: int) -> bool:
         seg = _segment_of_edge(first, edges, n, opts.start_node)
-        return len(np.unique(seg)) == n
+        return len(np.unique(seg)) == n * len(first.sizes)
 
     if fits(opts.segments):
         return
@@ -361,9 +399,12 @@ def _check_segments(first: Shape, name: str, opts: TrackOptions) -> None:
 def _segment_of_edge(shape: Shape, edges: np.ndarray, segments: int,
                      start: int) -> np.ndarray:
     """Segment index of every contour edge: ``segments`` stretches of equal arc length of
-    frame 0, the first starting at node ``start`` and following the node order."""
+    frame 0, the first starting at node ``start`` and following the node order; for
+    several contours, per contour (:func:`_contour_segments`)."""
     if not shape.ordered or shape.faces is not None:
         return np.full(len(edges), -1, dtype=np.intp)
+    if shape.contours:
+        return _contour_segments(shape, segments, start)
     p = shape.points
     length = np.linalg.norm(p[edges[:, 1]] - p[edges[:, 0]], axis=1)
     rolled = np.roll(np.arange(len(edges)), -start) if shape.closed else np.arange(len(edges))
@@ -373,19 +414,61 @@ def _segment_of_edge(shape: Shape, edges: np.ndarray, segments: int,
     return seg
 
 
+def _contour_segments(shape: Shape, segments: int, start: int) -> np.ndarray:
+    """Segments of a frame 0 of several contours, ``segments`` per contour, contour ``k``
+    holding segments ``k * segments`` to ``(k + 1) * segments - 1`` (edges in the order
+    of :attr:`Shape.edges`). The contour of node ``start`` starts there; every other one
+    at its node nearest in angle about frame 0's centroid, and is numbered the way the
+    first contour runs round (the sign of their areas), so that segment ``s`` of every
+    contour covers about the same sector (an endocardium and its epicardium)."""
+    p, own = shape.points, int(shape.contour_of[start])
+    angle = np.arctan2(*(p - shape.centroid).T[::-1])
+    way = np.sign(area(p[shape.slices[own]])) if shape.closed and shape.dim == 2 else 1.0
+    out = []
+    for k, rows in enumerate(shape.slices):
+        part = Shape(p[rows], closed=shape.closed)
+        first = start - rows.start if k == own else int(np.argmin(
+            np.abs(np.angle(np.exp(1j * (angle[rows] - angle[start]))))))
+        seg = _segment_of_edge(part, part.edges, segments, first)
+        if shape.closed and shape.dim == 2 and np.sign(area(p[rows])) != way:
+            seg = segments - 1 - seg  # numbered the other way round from the start
+        out.append(k * segments + seg)
+    return np.concatenate(out)
+
+
 def curve_distance(a: Shape, b: Shape) -> float:
     """Two-way distance between two objects: the larger of the mean distance of ``a``'s
     nodes to ``b`` and of ``b``'s nodes to ``a`` (to the polyline of an ordered contour,
     to the nodes of anything else; :func:`modalmorph.core.quality.curve_distances`), in the
     user's units."""
     ordered = bool(a.ordered and b.ordered and a.faces is None and b.faces is None)
+    if ordered and (a.contours or b.contours):
+        return _contours_distance(a, b)
     d_ab, d_ba = curve_distances(a.points, b.points, closed_a=a.closed, closed_b=b.closed,
                                  ordered=ordered)
     return float(max(d_ab.mean(), d_ba.mean()))
+
+
+def _contours_distance(a: Shape, b: Shape) -> float:
+    """:func:`curve_distance` of objects of several contours, contour by contour: each
+    contour of ``a`` against its partner in ``b`` (the same index when both have as
+    many contours, else :func:`~modalmorph.matching.contours.pair_contours`); contours
+    without a partner are left out."""
+    partners = np.c_[np.arange(len(a.sizes)), np.arange(len(a.sizes))] \
+        if len(a.sizes) == len(b.sizes) else pair_contours(a, b)
+    d_ab, d_ba = [], []
+    for k, j in partners:
+        one, two = curve_distances(a.points[a.slices[k]], b.points[b.slices[j]],
+                                   closed_a=a.closed, closed_b=b.closed)
+        d_ab.append(one)
+        d_ba.append(two)
+    return float(max(np.concatenate(d_ab).mean(), np.concatenate(d_ba).mean()))
 
 
 def _crosses_itself(points: np.ndarray, first: Shape) -> bool:
     """Whether a 2D contour (frame 0's topology on ``points``) crosses itself."""
     if points.shape[1] != 2 or not first.ordered:
         return False
+    if first.contours:  # each contour, and one contour across another
+        return len(crossing_segments(points, edges=first.edges)) > 0
     return self_crossings(points, closed=first.closed) > 0

@@ -6,9 +6,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.linalg import lapack
+from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
-__all__ = ["Newmark", "LoadTargets", "check_newmark", "UNMATCHED_RULES"]
+__all__ = ["Newmark", "LoadTargets", "ContourLoads", "contour_partners", "check_newmark",
+           "UNMATCHED_RULES", "CARRIERS"]
 
 UNMATCHED_RULES = ("arclength", "mean")
 
@@ -16,6 +18,9 @@ UNMATCHED_RULES = ("arclength", "mean")
 _SMALL_GROUP = 256
 # Target nodes per source node a stretch may hold and still be covered (method.md §4).
 _COVER = 1.5
+# Matched nodes (nearest, in the source) whose displacements carry a node of a contour
+# without a partner: those of a 2D point set's rule (MorphOptions.neighbours' default).
+CARRIERS = 6
 
 
 def check_newmark(alpha: float, delta: float) -> None:
@@ -265,6 +270,88 @@ class LoadTargets:
             out[nodes] = _weighted_mean(D, pts[None])
         for nodes, fixed in self._fixed:
             out[nodes] = fixed
+        return out
+
+
+def contour_partners(contour_of_a: np.ndarray, contour_of_b: np.ndarray,
+                     pairs: np.ndarray) -> np.ndarray:
+    """Partner contours (P, 2) of two objects from their node pairs (K, 2), given the
+    contour of every node (``Shape.contour_of``): the assignment that keeps the most
+    pairs (each source contour with the target contour it shares most pairs with);
+    contours sharing no pair stay unpaired."""
+    votes = np.zeros((int(contour_of_a.max()) + 1, int(contour_of_b.max()) + 1))
+    np.add.at(votes, (contour_of_a[pairs[:, 0]], contour_of_b[pairs[:, 1]]), 1.0)
+    r, c = linear_sum_assignment(votes, maximize=True)
+    keep = votes[r, c] > 0
+    return np.c_[r[keep], c[keep]].astype(np.intp)
+
+
+class ContourLoads:
+    """:class:`LoadTargets` of objects of several contours: each source contour pulled
+    onto its partner target contour alone, by the pairs that join them and the rule for
+    unmatched nodes along that contour; the nodes of a source contour without a partner
+    (or without a pair) move with the ``CARRIERS`` nearest matched nodes of the source
+    (the (20)-weighted mean of their displacements, as in 3D).
+
+    Parameters
+    ----------
+    source, target : ndarray, shape (m, d) and (n, d)
+        Nodes in one common frame.
+    pairs : ndarray of int, shape (K, 2)
+        Matched (source, target) indices (pairs joining non-partners are not pulled).
+    slices : tuple of (list of slice, list of slice)
+        The rows of each source and each target contour.
+    partners : ndarray of int, shape (P, 2)
+        ``(source contour, target contour)`` partners.
+    closed : tuple of bool
+        Whether the source and the target contours are closed.
+    rule : {"arclength", "mean"}
+        The rule for unmatched nodes along a contour.
+    """
+
+    def __init__(self, source, target, pairs, *, slices, partners, closed, rule):
+        rows, cols = slices
+        self.source, self.target = source, target
+        self.parts = []  # (source rows, target rows, LoadTargets)
+        for k, j in partners:
+            rk, rj = rows[k], cols[j]
+            inside = ((pairs[:, 0] >= rk.start) & (pairs[:, 0] < rk.stop)
+                      & (pairs[:, 1] >= rj.start) & (pairs[:, 1] < rj.stop))
+            if inside.any():
+                local = pairs[inside] - [rk.start, rj.start]
+                self.parts.append((rk, rj, LoadTargets(
+                    source[rk], target[rj], local, ordered=True, closed=closed[0],
+                    target_closed=closed[1], rule=rule)))
+        if not self.parts:
+            raise ValueError("no pair joins partner contours: nothing pulls the source")
+        self.partners = np.array([[rows.index(rk), cols.index(rj)]
+                                  for rk, rj, _ in self.parts], dtype=np.intp)
+        pulled = self.pairs
+        free = np.ones(len(source), bool)
+        for rk, _, _ in self.parts:
+            free[rk] = False
+        self.carried = np.flatnonzero(free)
+        self._carry = None
+        if self.carried.size:
+            k = min(CARRIERS, len(pulled))
+            dist, near = cKDTree(source[pulled[:, 0]]).query(source[self.carried], k=k)
+            dist, near = np.reshape(dist, (-1, k)), np.reshape(near, (-1, k))
+            disp = target[pulled[near, 1]] - source[pulled[near, 0]]  # (b, k, d)
+            self._carry = source[self.carried] + _weighted_mean(dist, disp)
+
+    @property
+    def pairs(self) -> np.ndarray:
+        """The (source, target) pairs pulled to each other by (19), (K', 2), in the rows of
+        the whole objects."""
+        return np.vstack([lt.pairs + [rk.start, rj.start] for rk, rj, lt in self.parts])
+
+    def targets(self, current: np.ndarray) -> np.ndarray:
+        """Target position of every node for the current shape ``current`` (m, d)."""
+        out = current.copy()
+        for rk, _, lt in self.parts:
+            out[rk] = lt.targets(current[rk])
+        if self._carry is not None:
+            out[self.carried] = self._carry
         return out
 
 

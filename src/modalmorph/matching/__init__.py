@@ -44,13 +44,15 @@ the rest, in the order of the default search:
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from ..core.align import Similarity, align
-from ..core.quality import area, check_simple
+from ..core.dynamics import contour_partners
+from ..core.quality import area, check_contours
 from ..core.shape import Shape, as_shape, check_pairs, spread_indices
 from ..errors import OptionError, ShapeError
 from ..options import METHODS, ROTATIONS, MatchOptions
@@ -58,6 +60,7 @@ from ..threads import limit
 from .alternation import alternate, fits, keep_or_turn
 from .clouds import refine
 from .coherent import settle
+from .contours import keep_partners, match_contours
 from .features import (
     FEATURE_SIGMA,
     MAX_MODEL_NODES,
@@ -109,6 +112,10 @@ class Matching:
         ``(m, n)``, the node counts of source and target.
     options : MatchOptions or None
         The options of the call that found them (recorded with a morph's parameters).
+    contours : ndarray of intp, shape (P, 2), or None
+        For objects of several contours: the partner contours, ``(source contour, target
+        contour)`` per row (every pair joins partners; contours in no row are
+        unmatched); None when both objects are one contour (or no contour).
     """
 
     pairs: np.ndarray
@@ -119,6 +126,7 @@ class Matching:
     similarity: Similarity | None
     nodes: tuple
     options: MatchOptions | None = None
+    contours: np.ndarray | None = None
 
     @property
     def source(self) -> np.ndarray:
@@ -252,15 +260,40 @@ def _match_paper(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions):
     return pairs, Z[pairs[:, 0], pairs[:, 1]], None
 
 
+def _match_several(src: Shape, tgt: Shape, opts: MatchOptions) -> Matching:
+    """Objects of several contours (:mod:`~modalmorph.matching.contours`): the default
+    matcher per pair of partner contours; the paper's searches over all the nodes, less
+    the pairs joining contours that are not partners."""
+    if not (src.ordered and tgt.ordered):
+        raise ShapeError("an object of several contours is matched with another ordered "
+                         "object (contours), not with a point set or a surface")
+    if opts.method == "auto":
+        pairs, cost, sim, partners = match_contours(
+            src, tgt, opts.rotation, partial(match, options=opts))
+        n_modes = DEFAULT_MODES if opts.modes is None else int(opts.modes)
+    else:
+        n_modes = DEFAULT_MODES if opts.modes is None else int(opts.modes)
+        n_modes = min(n_modes, src.dim * min(src.m, tgt.m, MAX_MODEL_NODES))
+        with limit(max(src.m, tgt.m)):
+            pairs, cost, sim = _match_paper(src, tgt, n_modes, opts)
+        partners = contour_partners(src.contour_of, tgt.contour_of, pairs)
+        keep = keep_partners(src, tgt, pairs, partners)
+        pairs, cost = pairs[keep], cost[keep]
+    order = np.argsort(pairs[:, 0], kind="stable")
+    return Matching(pairs=pairs[order].astype(np.intp), cost=cost[order], method=opts.method,
+                    modes=n_modes, sigma=opts.sigma, similarity=sim, nodes=(src.m, tgt.m),
+                    options=opts, contours=partners)
+
+
 def _shapes(source, target) -> tuple[Shape, Shape]:
     """Both objects as shapes of one dimension; a 2D contour must not cross itself, and a
     closed one must have an area."""
     src, tgt = as_shape(source, "source"), as_shape(target, "target")
     for name, shape in (("source", src), ("target", tgt)):
         if shape.dim == 2 and shape.ordered:
-            check_simple(shape.points, name, shape.closed)
-        if shape.dim == 2 and shape.ordered and shape.closed and (
-                abs(area(shape.normalized)) < FLAT_AREA):
+            check_contours(shape, name)
+        if shape.dim == 2 and shape.ordered and shape.closed and min(
+                abs(area(shape.normalized[r])) for r in shape.slices) < FLAT_AREA:
             raise ShapeError(f"{name} is a closed contour with no area (its nodes lie on "
                              "one line): a closed contour must enclose an area (an open "
                              "curve is Shape(points, closed=False))")
@@ -307,6 +340,8 @@ def match(source, target, *, options: MatchOptions | None = None, **overrides) -
         raise OptionError(f"options must be a MatchOptions, got {type(options).__name__}")
     opts = options.replace(**overrides) if overrides else options
     src, tgt = _shapes(source, target)
+    if src.contours or tgt.contours:
+        return _match_several(src, tgt, opts)
     n_modes = DEFAULT_MODES if opts.modes is None else int(opts.modes)
     n_modes = min(n_modes, src.dim * min(src.m, tgt.m, MAX_MODEL_NODES))
     with limit(max(src.m, tgt.m)):

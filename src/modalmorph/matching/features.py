@@ -16,7 +16,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..core.model import FEModel
-from ..core.shape import Shape, as_shape, resample, spread_indices
+from ..core.shape import Shape, as_shape, resample, share, spread_indices
 
 __all__ = ["FEATURE_SIGMA", "MAX_MODEL_NODES", "modal_features", "fix_signs", "affinity",
            "signature", "sq_dist", "Problem", "prepare"]
@@ -63,7 +63,8 @@ def modal_features(shape, n_modes: int, *, sigma: float | None = None,
         # mean spacing) is well conditioned whatever the input's sampling, and the modes
         # do not depend on how densely either contour was traced
         model_shape = Shape(resample(shape.points, min(shape.m, max_nodes),
-                                     closed=shape.closed), closed=shape.closed)
+                                     closed=shape.closed), closed=shape.closed) \
+            if not shape.contours else _resampled(shape, max_nodes)
     else:
         subset = spread_indices(shape, max_nodes)
         model_shape = shape if len(subset) == shape.m else Shape(
@@ -78,6 +79,15 @@ def modal_features(shape, n_modes: int, *, sigma: float | None = None,
         phi = at.reshape(shape.dim, shape.m, n_modes).transpose(1, 0, 2)
     rms = np.sqrt(np.mean(np.sum(phi**2, axis=1), axis=0))
     return phi / rms, modes.frequencies
+
+
+def _resampled(shape: Shape, max_nodes: int) -> Shape:
+    """An object of several contours, each resampled evenly by arc length, with at most
+    ``max_nodes`` nodes shared among them by length (:func:`share`)."""
+    counts = share(shape, min(shape.m, max_nodes))
+    pts = [resample(shape.points[r], c, closed=shape.closed)
+           for r, c in zip(shape.slices, counts, strict=True)]
+    return Shape(np.vstack(pts), closed=shape.closed, contours=tuple(counts))
 
 
 def fix_signs(phi1: np.ndarray, phi2: np.ndarray) -> np.ndarray:

@@ -102,6 +102,9 @@ class Simulation:
         Matched (source index, target index) pairs, at least one.
     options : MorphOptions, optional
         The physical model, loads, time integration and stop test.
+    partners : array_like of int, shape (P, 2), optional
+        Objects of several contours: the partner contours ``(source contour, target
+        contour)`` (None: those sharing the most pairs).
 
     Attributes
     ----------
@@ -121,10 +124,12 @@ class Simulation:
         None while running.
     """
 
-    def __init__(self, source: Shape, target: Shape, pairs, options: MorphOptions | None = None):
-        self.system = s = ModalSystem.build(source, target, pairs, options)
+    def __init__(self, source: Shape, target: Shape, pairs, options: MorphOptions | None = None,
+                 partners: np.ndarray | None = None):
+        self.system = s = ModalSystem.build(source, target, pairs, options, partners)
         self.stop = choose_stop_test(s.source, s.target, s.target_n,
-                                     Limits.from_options(s.options, s.target.size, s.size))
+                                     Limits.from_options(s.options, s.target.size, s.size),
+                                     s.partners)
         self.history = History()
         self.steps = 0
         self.reason: str | None = None

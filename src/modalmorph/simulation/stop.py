@@ -2,10 +2,10 @@
 
 One class per kind of object, chosen once by :func:`choose_stop_test`, all with the
 interface of :class:`StopTest`: :class:`CurveStop` for contours (the two-way distance
-between the curves), :class:`SurfaceStop` for 3D point sets and surfaces (the two-way
-distance to the other's surface less the target's roughness), :class:`PairStop` for the
-others (the mean distance of the pulled pairs). Distances are in the model's normalised
-units.
+between the curves; :class:`ContourStop` per pair of partner contours),
+:class:`SurfaceStop` for 3D point sets and surfaces (the two-way distance to the other's
+surface less the target's roughness), :class:`PairStop` for the others (the mean
+distance of the pulled pairs). Distances are in the model's normalised units.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from ..core.quality import Polyline
 from ..core.shape import Shape, even_subset, resample
 from ..options import MorphOptions
 
-__all__ = ["CurveStop", "LAZY_SPACINGS", "Limits", "PLANE", "PairStop", "STALL",
+__all__ = ["ContourStop", "CurveStop", "LAZY_SPACINGS", "Limits", "PLANE", "PairStop", "STALL",
            "STALL_GAIN", "StopTest", "SurfaceStop", "choose_stop_test", "to_surface"]
 
 STALL = 5  # steps over which a stalled distance means equilibrium (method.md §5)
@@ -130,6 +130,30 @@ class CurveStop(StopTest):
         return max(near, float(d_ab.mean()), float(d_ba.mean()) - self.floor)
 
 
+class ContourStop(StopTest):
+    """Objects of several contours: the largest, over the pairs of partner contours, of
+    :class:`CurveStop`'s measure of the source contour against its partner target contour
+    alone (each with its own ``floor``, the source contour's node count spread along
+    the target contour); contours without a partner are not measured. With ``lazy`` the
+    curves are measured only once ``near`` is within the tolerance."""
+
+    lazy = True
+
+    def __init__(self, limits: Limits, target: np.ndarray, *, source: Shape,
+                 target_shape: Shape, partners: np.ndarray):
+        super().__init__(limits)
+        self.rows = [source.slices[k] for k in partners[:, 0]]
+        self.tests = [CurveStop(limits, target[target_shape.slices[j]], closed=source.closed,
+                                target_closed=target_shape.closed, m=source.sizes[k])
+                      for k, j in partners]
+
+    def distance(self, current: np.ndarray, near: float, lazy: bool = True) -> float:
+        if lazy and near > self.limits.tolerance:
+            return near
+        return max(test.distance(current[rows], near, lazy=False)
+                   for rows, test in zip(self.rows, self.tests, strict=True))
+
+
 class SurfaceStop(StopTest):
     """3D point sets and surfaces: the larger of the mean distances both ways between the
     shape's nodes and the other's surface (:func:`to_surface`), less the target's own
@@ -165,8 +189,12 @@ class SurfaceStop(StopTest):
 
 
 def choose_stop_test(source: Shape, target: Shape, target_n: np.ndarray,
-                     limits: Limits) -> StopTest:
-    """The stop test for these objects (``target_n``: the target's nodes, normalised)."""
+                     limits: Limits, partners: np.ndarray | None = None) -> StopTest:
+    """The stop test for these objects (``target_n``: the target's nodes, normalised;
+    ``partners``: the partner contours (P, 2) of objects of several contours)."""
+    if partners is not None:
+        return ContourStop(limits, target_n, source=source, target_shape=target,
+                           partners=partners)
     if source.ordered and target.ordered:
         return CurveStop(limits, target_n, closed=source.closed,
                          target_closed=target.closed, m=source.m)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import linalg
 
-from ..core.dynamics import LoadTargets, Newmark
+from ..core.dynamics import ContourLoads, LoadTargets, Newmark, contour_partners
 from ..core.element import self_entries
 from ..core.energy import node_energy
 from ..core.model import FEModel
@@ -24,7 +24,7 @@ from ..options import MorphOptions
 from .basis import Field, flat, mode_count, nodes, similarity_fields, superposed_modes
 from .result import Resolved
 
-__all__ = ["ModalSystem", "RANK_TOL", "damping_matrix", "elastic_stiffness",
+__all__ = ["ModalSystem", "RANK_TOL", "several", "damping_matrix", "elastic_stiffness",
            "frequency_range", "similarity_free", "springs"]
 
 RANK_TOL = 1e-10  # similarity fields whose modal image is below this fraction are dependent
@@ -73,6 +73,9 @@ class ModalSystem:
         The consistent loads' modal spring (None: loads through the field, node by node).
     newmark : Newmark
         The integrator of the loaded model: ``K_mod``, ``C_mod`` and the time step.
+    partners : ndarray of int, shape (P, 2), or None
+        Objects of several contours: the partner contours that pull each other
+        (:class:`~modalmorph.core.dynamics.ContourLoads`); None for one contour.
     """
 
     source: Shape
@@ -95,10 +98,15 @@ class ModalSystem:
     stiffness: np.ndarray
     kappa: float | None
     newmark: Newmark
+    partners: np.ndarray | None = None
 
     @classmethod
-    def build(cls, source, target, pairs, options: MorphOptions | None = None) -> ModalSystem:
-        """The system of ``source`` (Shape or (m, d)) pulled onto ``target`` by ``pairs``."""
+    def build(cls, source, target, pairs, options: MorphOptions | None = None,
+              partners: np.ndarray | None = None) -> ModalSystem:
+        """The system of ``source`` (Shape or (m, d)) pulled onto ``target`` by ``pairs``;
+        for objects of several contours, ``partners`` (P, 2) are the partner contours
+        (None: derived from the pairs,
+        :func:`~modalmorph.core.dynamics.contour_partners`)."""
         source, target = as_shape(source, "source"), as_shape(target, "target")
         pairs = check_pairs(pairs, source.m, target.m)
         o = MorphOptions() if options is None else options
@@ -117,9 +125,7 @@ class ModalSystem:
         X1 = reduced.to_normalized(source.points)  # all in the model's normalised frame
         Y = reduced.to_normalized(target.points)
         field, spread = _nodal_field(model, modes, X1, reduced is not source)
-        loads = LoadTargets(X1, Y, pairs, ordered=bool(source.ordered), closed=source.closed,
-                            target_closed=target.closed, neighbours=o.neighbours,
-                            rule=o.unmatched)
+        loads = _loads(source, target, X1, Y, pairs, o, partners)
         stiffness = elastic_stiffness(modes, mass_modes, model.points, o.free_motion)
         kappa, spring = springs(field, k_abs, consistent=o.loads == "consistent"
                                 and spread is None)
@@ -131,7 +137,8 @@ class ModalSystem:
                    model=model, n_modes=n_modes, modes=modes, mass_modes=mass_modes,
                    field=field, spread=spread, k_ref=k_ref, k_abs=k_abs, source_n=X1,
                    target_n=Y, loads=loads, pulled=loads.pairs, stiffness=stiffness,
-                   kappa=kappa, newmark=newmark)
+                   kappa=kappa, newmark=newmark,
+                   partners=getattr(loads, "partners", None))
 
     @property
     def size(self) -> float:
@@ -173,6 +180,25 @@ class ModalSystem:
         """The values resolved from the options (sigma, modes, model nodes, solver)."""
         return Resolved(sigma=self.model.sigma, modes=self.n_modes,
                         model_nodes=self.model.m, solver=self.model.solver)
+
+
+def several(source: Shape, target: Shape) -> bool:
+    """Whether the objects are contours and one of them has several."""
+    return bool(source.ordered and target.ordered and (source.contours or target.contours))
+
+
+def _loads(source: Shape, target: Shape, X1, Y, pairs, o: MorphOptions, partners):
+    """Where every node is pulled (19)-(20): :class:`LoadTargets`, or per pair of partner
+    contours (:class:`ContourLoads`)."""
+    if not several(source, target):
+        return LoadTargets(X1, Y, pairs, ordered=bool(source.ordered), closed=source.closed,
+                           target_closed=target.closed, neighbours=o.neighbours,
+                           rule=o.unmatched)
+    if partners is None:
+        partners = contour_partners(source.contour_of, target.contour_of, pairs)
+    return ContourLoads(X1, Y, pairs, slices=(source.slices, target.slices),
+                        partners=np.asarray(partners, dtype=np.intp),
+                        closed=(source.closed, target.closed), rule=o.unmatched)
 
 
 def _nodal_field(model: FEModel, modes: Modes, points: np.ndarray, reduced: bool):
