@@ -27,6 +27,7 @@ import numpy as np
 
 __all__ = ["RingPhantom", "ring_phantom"]
 
+SIZE = 128  # image side, pixels: a clinical cine short-axis matrix (LV 50-70 px across)
 NOISE_HARMONICS = 6  # angular harmonics of the boundary noise (a smooth, wavy edge)
 
 
@@ -89,17 +90,15 @@ class RingPhantom:
         return self.centre + np.c_[r * np.cos(angle), -r * np.sin(angle)]
 
 
-def ring_phantom(frames: int = 30, *, size: int = 128, inner: float = 20.0,
+def ring_phantom(frames: int = 30, *, inner: float = 20.0,
                  outer: float = 30.0, contraction: float = 0.3, twist: float = 0.0,
                  sector: tuple = (), noise: float = 0.0, seed: int = 0) -> RingPhantom:
-    """A :class:`RingPhantom` rendered on ``size x size`` pixels.
+    """A :class:`RingPhantom` rendered on :data:`SIZE` x :data:`SIZE` pixels.
 
     Parameters
     ----------
     frames : int
         Number of frames F (end-diastole at 0, end-systole at ``F // 2``).
-    size : int
-        Image side, pixels (the ring is centred, a quarter pixel off the grid).
     inner, outer : float
         Endocardial and epicardial radii at end-diastole, pixels (clinical: LV 50-70 px
         across on a 128 x 128 cine slice).
@@ -114,6 +113,7 @@ def ring_phantom(frames: int = 30, *, size: int = 128, inner: float = 20.0,
     seed : int
         Seed of the noise.
     """
+    size = SIZE  # the ring is centred, a quarter pixel off the grid
     t = np.sin(np.pi * np.arange(frames) / max(frames - 1, 1)) ** 2
     centre = np.array([size / 2 - 0.25, size / 2 + 0.25])
     ph = RingPhantom(masks=np.zeros((frames, size, size), dtype=bool), centre=centre,

@@ -91,7 +91,7 @@ def write_strain(result, out, *, inputs=(), figures: bool = True,
             _figures(result, tmp)
         if report:
             (tmp / "report.html").write_text(_page(result, tmp), encoding="utf-8")
-        if not figures:
+        if report and not figures:  # drawn for the page only
             for name in FIGURES:
                 (tmp / name).unlink()
         names = sorted(p.name for p in tmp.iterdir())
