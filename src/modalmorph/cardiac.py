@@ -66,6 +66,7 @@ DEFINITIONS = {
                    "second given frame_interval)",
     "peak": "the value of largest magnitude over the frames, and its frame",
 }
+CONTOUR_FILES = (".csv", ".tsv", ".txt", ".json", ".svg")  # read as contours, not masks
 MIN_HOLE_PIXELS = 9  # a hole smaller than a 3 x 3 block is a speck, not a ventricle
 # Gaussian blur (px) of a mask before its 0.5 level is taken: sub-pixel boundaries. On the
 # 30-frame ring phantoms (128 x 128, LV 60 px, no noise) the largest error of the global
@@ -202,11 +203,11 @@ def strain(frames, *, options: StrainOptions | None = None,
         invalid options.
     """
     opts = (options or StrainOptions()).replace(**overrides)
-    masks, spacing, names = _masks_of(frames, names)
+    masks, spacing, names, shapes = _masks_of(frames, names)
     if masks is not None:
         rings = [mask_ring(m, names[f], opts, spacing=spacing) for f, m in enumerate(masks)]
     else:
-        rings = [_shape_ring(s, names[f], opts) for f, s in enumerate(frames)]
+        rings = [_shape_ring(s, names[f], opts) for f, s in enumerate(shapes)]
     if opts.reference_frame >= len(rings):
         raise OptionError(f"reference_frame must be a frame (0..{len(rings) - 1}), got "
                           f"{opts.reference_frame}")
@@ -373,12 +374,19 @@ def _reference_angle(opts: StrainOptions, ref_endo, masks, spacing) -> float:
 
 
 def _masks_of(frames, names):
-    """``(masks (F, H, W) or None, spacing (x, y), names)`` of the inputs."""
-    spacing = (1.0, 1.0)
-    if isinstance(frames, str | Path) or (
-            isinstance(frames, Sequence) and len(frames) and
-            all(isinstance(f, str | Path) for f in frames)):
-        masks, spacing, file_names = read_masks(frames)
+    """``(masks (F, H, W) or None, spacing (x, y), names, frames)`` of the inputs: masks,
+    or (``masks`` None) the frames as contours (contour files read as Shapes)."""
+    spacing, masks = (1.0, 1.0), None
+    paths = [frames] if isinstance(frames, str | Path) else list(frames) if (
+        isinstance(frames, Sequence) and len(frames) and
+        all(isinstance(f, str | Path) for f in frames)) else None
+    if paths and all(Path(p).suffix.lower() in CONTOUR_FILES for p in paths):
+        from .io import read_shape
+
+        frames = [read_shape(p) for p in paths]
+        names = tuple(Path(p).name for p in paths) if names is None else names
+    elif paths:
+        masks, spacing, file_names = read_masks(paths)
         names = file_names if names is None else names
     elif isinstance(frames, np.ndarray) and frames.ndim == 3 or (
             isinstance(frames, Sequence) and len(frames) and
@@ -389,15 +397,13 @@ def _masks_of(frames, names):
             raise ShapeError(f"masks of different sizes: {sorted(shapes)}; all frames "
                              f"must have one size")
         masks = np.asarray(frames)
-    else:
-        masks = None
     n = len(masks) if masks is not None else len(frames)
     if n < 2:
         raise ShapeError(f"frames must hold at least 2 frames, got {n}")
     names = tuple(f"frame {i}" for i in range(n)) if names is None else tuple(map(str, names))
     if len(names) != n:
         raise ValueError(f"names must have one entry per frame ({n}), got {len(names)}")
-    return masks, spacing, names
+    return masks, spacing, names, frames
 
 
 def read_masks(paths) -> tuple[np.ndarray, tuple, tuple]:

@@ -31,6 +31,8 @@ def plot_strain_curves(result, *, kinds=None, fig=None):
     """Strain against frame, one panel per kind, a line per segment (global in black,
     thick), each peak marked by a dot. Returns the Figure."""
     plt = _plt()
+    from matplotlib.ticker import MaxNLocator
+
     kinds = _kinds(result) if kinds is None else tuple(kinds)
     if fig is None:
         fig = plt.figure(figsize=(5.2 * min(len(kinds), 2), 3.6 * ((len(kinds) + 1) // 2)),
@@ -49,6 +51,8 @@ def plot_strain_curves(result, *, kinds=None, fig=None):
         ax.axvline(x[result.reference], color="0.6", lw=0.6, ls=":")
         ax.set_title(kind.replace("_", " "))
         ax.set_xlabel("time (s)" if dt else "frame")
+        if not dt:
+            ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_ylabel("strain (%)")
     for ax in axes[len(kinds):]:
         ax.set_visible(False)
