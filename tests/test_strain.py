@@ -210,3 +210,21 @@ def test_nifti_input(tmp_path, phantom):
     assert got.spacing == (0.5, 0.5)
     assert_allclose(got.endo[0], ref.endo[0] * 0.5, atol=1e-9)  # mm, not pixels
     assert_allclose(got.radial, ref.radial, atol=1e-9)  # strain has no unit
+
+
+def test_nifti_spacings_must_agree(tmp_path, phantom):
+    nibabel = pytest.importorskip("nibabel")
+    for name, dx in (("a.nii", 0.5), ("b.nii", 0.7)):
+        data = phantom.masks[0].astype(np.uint8).T  # (X, Y)
+        nibabel.save(nibabel.Nifti1Image(data, np.diag([dx, dx, 1.0, 1.0])), tmp_path / name)
+    assert main(["strain", str(tmp_path / "a.nii"), str(tmp_path / "b.nii"), "--out",
+                 str(tmp_path / "o")]) == 2
+
+
+def test_cli_rv_point(tmp_path, phantom):
+    np.save(tmp_path / "ring.npy", phantom.masks[:2].astype(np.uint8))
+    c = phantom.centre
+    assert main(["strain", str(tmp_path / "ring.npy"), "--out", str(tmp_path / "o"), "-q",
+                 "--no-figures", "--rv-point", f"{c[0] - 30},{c[1]}"]) == 0
+    record = json.loads((tmp_path / "o" / "strain.json").read_text())
+    assert record["reference_angle"] == pytest.approx(120.0, abs=1.0)
