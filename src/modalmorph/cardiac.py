@@ -205,7 +205,13 @@ def strain(frames, *, options: StrainOptions | None = None,
     opts = (options or StrainOptions()).replace(**overrides)
     masks, spacing, names, shapes = _masks_of(frames, names)
     if masks is not None:
-        rings = [mask_ring(m, names[f], opts, spacing=spacing) for f, m in enumerate(masks)]
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            rings = [mask_ring(m, names[f], opts, spacing=spacing)
+                     for f, m in enumerate(masks)]
+        if said:  # the choice of object once, not once per frame
+            more = f" (and in {len(said) - 1} more frames)" if len(said) > 1 else ""
+            warnings.warn(f"{said[0].message}{more}", stacklevel=2)
     else:
         rings = [_shape_ring(s, names[f], opts) for f, s in enumerate(shapes)]
     if opts.reference_frame >= len(rings):
