@@ -8,6 +8,7 @@ import numpy as np
 __all__ = ["plot_strain_curves", "plot_bullseye", "plot_wall", "SEGMENT_COLORS"]
 
 SEGMENT_COLORS = "tab10"  # segment s is colour s - 1 of this map (global: black)
+DARK = 0.3  # RdBu_r beyond 0.5 +- this is dark enough for white text (looked at)
 
 
 def _plt():
@@ -83,7 +84,9 @@ def plot_bullseye(result, kind: str | None = None, *, ax=None):
         theta = start + (s - 0.5) * width
         ax.bar(theta, 1.0, width=width, bottom=0.5, color=cmap(norm(peak[s])),
                edgecolor="white", lw=1.5)
-        ax.text(theta, 1.0, f"{s}\n{peak[s]:+.1f}", ha="center", va="center", fontsize=9)
+        dark = abs(norm(peak[s]) - 0.5) > DARK  # white text on the dark ends of the map
+        ax.text(theta, 1.0, f"{s}\n{peak[s]:+.1f}", ha="center", va="center", fontsize=9,
+                color="white" if dark else "black")
     ax.text(0, 0, f"global\n{peak[0]:+.1f} %", ha="center", va="center", fontsize=10)
     ax.set_ylim(0, 1.5)
     ax.set_axis_off()
