@@ -76,6 +76,34 @@ def _mask(size=40) -> np.ndarray:
         np.uint8) * 255
 
 
+def _nifti(ext: str, array, zero_spacing: bool = False) -> bytes:
+    """A NIfTI-1 file's bytes (gzipped for .nii.gz) holding ``array`` (X, Y[, ...]), pixel
+    spacing 1.5 (or a header saying 0 for the first axis)."""
+    import gzip
+
+    import nibabel
+
+    image = nibabel.Nifti1Image(array, np.diag([1.5, 1.5, 1.0, 1.0]))
+    data = bytearray(image.to_bytes())
+    if zero_spacing:
+        data[80:84] = struct.pack("<f", 0.0)  # pixdim[1], after dim (40) and 6 fields
+    return gzip.compress(bytes(data), mtime=0) if ext == ".nii.gz" else bytes(data)
+
+
+def _nifti_cases(ext: str) -> dict[str, bytes]:
+    ring = (_mask() > 0).astype(np.uint8) * 2
+    ring[15:25, 15:25] = 1
+    return {
+        "blank": _nifti(ext, np.zeros((20, 20), np.uint8)),
+        "labels": _nifti(ext, ring),  # a label image without --label: refused, named
+        "volume": _nifti(ext, np.zeros((8, 8, 3, 2), np.uint8)),  # 3D+t: refused
+        "frames": _nifti(ext, np.stack([_mask()] * 3, axis=-1)),  # 2D+t: a sequence
+        "zero_spacing": _nifti(ext, _mask(), zero_spacing=True),
+        "nan": _nifti(ext, np.where(_mask() > 0, np.nan, 0.0).astype(np.float32)),
+        "one_pixel": _nifti(ext, np.ones((1, 1), np.uint8)),
+    }
+
+
 def _mesh(ext: str, points=OCTA_POINTS, faces=OCTA_FACES, fmt=None) -> bytes:
     import meshio
 
@@ -410,6 +438,8 @@ def corpus(seed: int = 20050328) -> dict[str, bytes]:
         add(ext, _image(ext, _mask()), _image_cases(ext, rng))
     for ext in _MESH_EXTS:
         add(ext, _mesh(ext), _mesh_cases(ext))
+    for ext in (".nii", ".nii.gz"):
+        add(ext, _nifti(ext, _mask()), _nifti_cases(ext))
     return files
 
 

@@ -252,10 +252,17 @@ def _ready(browser):
     return browser.execute_script("return document.body.dataset.ready")
 
 
-def _drawn_shape(browser) -> np.ndarray:
-    """The nodes of the shape drawn now (the path ``M x y L x y ... Z``)."""
-    d = browser.execute_script("return document.querySelector('#view .shape').getAttribute('d')")
-    return np.array([[float(v) for v in p.split()] for p in re.split("[MLZ]", d) if p])
+def _drawn_shape(browser, selector="#view .shape") -> np.ndarray:
+    """The nodes of the shape drawn now (the path ``M x y L x y ... Z``, one ``M ... Z``
+    per contour)."""
+    return np.vstack(_drawn_loops(browser, selector))
+
+
+def _drawn_loops(browser, selector) -> list:
+    """The nodes of each subpath (contour) of a drawn path, in order."""
+    d = browser.execute_script(f"return document.querySelector('{selector}').getAttribute('d')")
+    return [np.array([[float(v) for v in p.split()] for p in re.split("[LZ]", sub) if p])
+            for sub in d.split("M") if sub.strip()]
 
 
 def _to_last_step(browser):
@@ -360,9 +367,7 @@ def test_app_in_browser(server, browser, downloads, heart_result, tmp_path):
           "the image under the contour")
     assert "error" not in browser.find_element(By.ID, "input-msg").get_attribute("class"), \
         browser.find_element(By.ID, "input-msg").text
-    outline = np.array(browser.execute_script(
-        "return document.querySelector('#view .source').getAttribute('points')"
-        ".split(' ').map(p => p.split(',').map(Number))"))
+    outline = _drawn_shape(browser, "#view .source")
     assert_allclose(outline.mean(axis=0), [51, 39.5], atol=1.0)  # the ellipse's centre
     # no script error (the refused upload's 400 is logged as a network entry)
     assert not [e for e in browser.get_log("browser") if e["source"] != "network"]
@@ -408,11 +413,33 @@ def test_track_report_plays_the_frames(browser, hearts, tmp_path):
     _wait(browser, lambda b: _ready(b) == "result", "the embedded track")
     assert _to_last_step(browser) == 2
     assert_allclose(_drawn_shape(browser), result.points[-1], atol=COORD_ATOL, rtol=0)
-    drawn_target = np.array(browser.execute_script(
-        "return document.querySelector('#view .target').getAttribute('points')"
-        ".split(' ').map(p => p.split(',').map(Number))"))
-    assert_allclose(drawn_target[:-1], result.frames[-1].points, atol=COORD_ATOL)  # frame 2
+    drawn_target = _drawn_shape(browser, "#view .target")
+    assert_allclose(drawn_target, result.frames[-1].points, atol=COORD_ATOL)  # frame 2
     assert "frame 2 / 2" in browser.find_element("id", "step-label").text
+
+
+def test_report_draws_each_contour_as_its_own_loop(browser, tmp_path):
+    from modalmorph.io.images import mask_shape
+
+    rows, cols = np.indices((100, 100))
+    r = np.hypot(cols - 50.0, rows - 45.0)
+    source = mask_shape((r <= 30) & (r > 15), "ring", nodes=60)  # outline, then its hole
+    centre = source.points.mean(axis=0)
+    target = source.with_points(centre + (source.points - centre) * 1.1)
+    pairs = np.c_[np.arange(source.m), np.arange(source.m)]
+    result = morph(source, target, matching=pairs, max_steps=6)
+    payload = result_payload(result)
+    assert payload["source_contours"] == payload["target_contours"] == list(source.contours)
+    browser.get(write_html(result, tmp_path / "ring.html").as_uri())
+    _wait(browser, lambda b: _ready(b) == "result", "the embedded ring")
+    _to_last_step(browser)
+    for selector, points in (("#view .shape", result.shapes[-1]),
+                             ("#view .source", source.points),
+                             ("#view .target", target.points)):
+        loops = _drawn_loops(browser, selector)  # one subpath per contour: no bridge
+        assert [len(p) for p in loops] == list(source.contours), selector
+        assert_allclose(np.vstack(loops), points, atol=COORD_ATOL, rtol=0)
+    assert not browser.get_log("browser")
 
 
 def test_payload_says_which_way_y_points(heart_result):

@@ -4,6 +4,8 @@ import json
 import re
 import subprocess
 import sys
+import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -222,21 +224,32 @@ def test_entry_point_runs_as_module():
     assert done.returncode == 0 and "modalmorph" in done.stdout
 
 
-def _svg_two_subpaths(path):
-    path.write_text('<svg xmlns="http://www.w3.org/2000/svg"><path d="M 40 100 '
-                    'A 60 40 0 1 0 160 100 C 160 60, 130 60, 100 60 S 40 60, 40 100 Z '
-                    'M 0 0 L 10 0 L 10 10 Z"/></svg>')
+def _png_blob(path):
+    from PIL import Image
+
+    rows, cols = np.indices((120, 200))
+    Image.fromarray((np.hypot((cols - 100) / 60, (rows - 60) / 40) <= 1).astype(np.uint8)
+                    * 255).save(path)
     return path
 
 
-def test_warnings_one_line_each_after_success_none_after_error(tmp_path, hand_csvs, capsys):
-    svg = _svg_two_subpaths(tmp_path / "two.svg")  # read_shape warns: uses the first subpath
+def test_warnings_one_line_each_after_success_none_after_error(tmp_path, hand_csvs, capsys,
+                                                               monkeypatch):
+    from modalmorph.io import read_shape
+
+    def read_and_warn(path, options):  # a reader's warning (as meshio's), on one line
+        if Path(path).suffix == ".png":
+            warnings.warn(f"{path}: a reader's warning\nover two lines", stacklevel=2)
+        return read_shape(path, options)
+
+    monkeypatch.setattr(runs, "read_shape", read_and_warn)
+    svg = _png_blob(tmp_path / "two.png")
     out = tmp_path / "out"
     assert _run("morph", svg, hand_csvs[1], "--out", out, "--nodes", "70", "-q",
                 "--tol", "0.5", "--no-figures", "--no-gif") == 0
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and all(e.startswith("modalmorph: warning: ") for e in err)
-    assert "two.svg" in err[0] and "y pointing up" in err[1]  # an SVG and a CSV: mirrored?
+    assert "two.png" in err[0] and "y pointing up" in err[1]  # an image and a CSV: mirrored?
     c3 = _csv(tmp_path / "c3.csv", np.random.default_rng(1).standard_normal((30, 3)))
     assert _run("morph", svg, c3, "--out", tmp_path / "o2") == 2  # warns, then fails
     err = capsys.readouterr().err.strip().splitlines()

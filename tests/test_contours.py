@@ -94,6 +94,17 @@ def test_ring_partners_survive_a_turn(turn):
     r = mm.morph(a, b, matching=m)
     assert r.converged, r.message
     assert max(contour_gaps(r.shapes[-1], a, b, m.contours)) < ON_CURVE
+    assert max(crossings(p, a) for p in r.shapes) == 0
+
+
+def test_unmatched_nodes_walk_along_their_own_contour():
+    a, b = ring(30, 20, 60, 40), ring(27, 15, 60, 40)
+    given = np.c_[np.arange(100), np.arange(100)]
+    gap = np.r_[55:60, 60:65]  # the last outer nodes and the first inner ones
+    r = mm.morph(a, b, matching=np.delete(given, gap, axis=0))
+    assert r.converged, r.message
+    assert max(contour_gaps(r.shapes[-1], a, b, [(0, 0), (1, 1)])) < ON_CURVE
+    assert max(crossings(p, a) for p in r.shapes) == 0
 
 
 def test_contours_listed_in_another_order_keep_their_partners():
@@ -205,12 +216,23 @@ def test_curve_distance_is_contour_by_contour():
     assert mm.tracking.curve_distance(a, b) == pytest.approx(40 / 100, rel=0.05)
 
 
-def test_three_d_polylines_of_several_contours_are_refused_by_name():
-    p = np.c_[blob((0, 0), (3, 3), 20), np.zeros(20)]
-    q = np.c_[blob((0, 0), (1, 1), 12), np.ones(12)]
-    three = Shape(np.vstack([p, q]), ordered=True, contours=(20, 12))
-    with pytest.raises(ShapeError, match="2D only"):
-        mm.match(three, three)
+def test_three_d_polylines_of_several_contours():
+    def rings(scale=1.0, sizes=(40, 30), z=(0.0, 5.0), turn=0.0):
+        p = np.c_[blob((0, 0), (10 * scale, 8 * scale), sizes[0], wobble=0.05),
+                  z[0] + 0.5 * np.sin(np.arange(sizes[0]) / 3)]
+        q = np.c_[blob((1, 0), (6 * scale, 5 * scale), sizes[1], wobble=0.05, lobes=2),
+                  np.full(sizes[1], z[1])]
+        c, s = np.cos(np.radians(turn)), np.sin(np.radians(turn))
+        turned = np.vstack([p, q]) @ np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]])
+        return Shape(turned, ordered=True, contours=sizes)
+
+    a, b = rings(), rings(0.9, (45, 28), (0.5, 5.5), turn=40.0)
+    m = mm.match(a, b)
+    assert m.contours.tolist() == [[0, 0], [1, 1]]
+    assert correspondence_rotation(a, b, m.pairs) == pytest.approx(40.0, abs=2.0)
+    r = mm.morph(a, b, matching=m)
+    assert r.converged, r.message
+    assert max(contour_gaps(r.shapes[-1], a, b, m.contours)) < ON_CURVE
 
 
 def test_crossing_contours_are_refused():

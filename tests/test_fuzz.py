@@ -47,8 +47,9 @@ def corpus(tmp_path_factory):
 
 def test_corpus_covers_every_extension(corpus):
     from modalmorph.io import SUPPORTED_EXTENSIONS
+    from modalmorph.io.base import extension
 
-    found = {p.suffix for p in corpus}
+    found = {extension(p) for p in corpus}
     assert found >= set(SUPPORTED_EXTENSIONS) - {".jpeg", ".tiff"}  # aliases of .jpg, .tif
     assert len(corpus) >= 500
 
@@ -96,6 +97,11 @@ def test_read_frames_on_the_corpus_raises_only_named_input_file_errors(corpus):
     ("float_nan.tif", "non-finite"),
     ("faces_2d.json", "has triangles but 2D points"),
     ("faces_2d_points.npz", "has triangles but 2D points"),
+    ("volume.nii", r"expected a 2D slice .* got an array of shape \(8, 8, 3, 2\)"),
+    ("zero_spacing.nii.gz", "pixel spacing is invalid"),
+    ("labels.nii", "for a label image, label="),
+    ("frames.nii.gz", "a 2D\\+t volume of 3 frames"),
+    ("cut50.nii", "cannot read the NIfTI data"),
 ])
 def test_named_problems(corpus, name, message):
     path = next(p for p in corpus if p.name == name)

@@ -220,11 +220,14 @@ def test_svg_rotation_and_matrix(tmp_path):
     assert_allclose(shape.points, [[-10, 21], [-10, 31], [-20, 31], [-20, 21]], atol=1e-12)
 
 
-def test_svg_several_subpaths_warns(tmp_path):
+def test_svg_several_subpaths_are_contours(tmp_path):
     path = _svg(tmp_path, '<path d="M0 0 H10 V10 Z M20 20 H30 V30 Z"/>')
-    with pytest.warns(UserWarning, match="2 subpaths; using the first"):
-        shape = read_shape(path, nodes=12)
-    assert shape.points.max() <= 10
+    shape = read_shape(path, nodes=12)
+    assert shape.sizes == (6, 6) and shape.closed
+    assert shape.contour(0).points.max() <= 10 and shape.contour(1).points.min() >= 20
+    mixed = _svg(tmp_path, '<path d="M0 0 H10 V10 Z M20 20 H30 V30"/>', "mixed.svg")
+    with pytest.raises(ValueError, match="mixes closed and open subpaths"):
+        read_shape(mixed)
 
 
 def test_svg_circle_ellipse_rect_and_viewbox(tmp_path):

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from modalmorph.core.shape import Shape
 from modalmorph.io import write_vtk_series
 
 pytest.importorskip("matplotlib")
@@ -55,10 +56,8 @@ def fake_morph(src, tgt, *, closed=True, faces=None, ordered=None, steps=T):
         matching=SimpleNamespace(pairs=np.c_[np.arange(0, m, 2), np.arange(0, m, 2)]),
         similarity=None, converged=True, stop_reason="tolerance",
         message="converged after 5 steps",
-        source=SimpleNamespace(points=src, closed=closed, faces=faces, ordered=ordered,
-                               dim=d),
-        target=SimpleNamespace(points=tgt, closed=closed, faces=faces, ordered=ordered,
-                               dim=d),
+        source=Shape(src, closed=closed, faces=faces, ordered=ordered),
+        target=Shape(tgt, closed=closed, faces=faces, ordered=ordered),
         steps=steps,
     )
 

@@ -107,3 +107,68 @@ def test_spread_indices_of_a_huge_cloud_is_linear_and_even():
     gap = cKDTree(p[idx]).query(p)[0].max()
     spacing = np.sqrt(4 * np.pi / 200)  # of 200 points spread evenly over the sphere
     assert gap < spacing  # measured 0.82 of it; the farthest of all the nodes: 0.79
+
+
+def _ring(n_outer=40, n_inner=24, r_outer=2.0, r_inner=1.0):
+    t = np.linspace(0, 2 * np.pi, n_outer, endpoint=False)
+    s = np.linspace(0, 2 * np.pi, n_inner, endpoint=False)
+    pts = np.vstack([r_outer * np.c_[np.cos(t), np.sin(t)],
+                     r_inner * np.c_[np.cos(s), np.sin(s)]])
+    return Shape(pts, contours=(n_outer, n_inner))
+
+
+def test_contours_split_the_rows_and_close_each_loop():
+    ring = _ring()
+    assert ring.sizes == (40, 24) and ring.slices == [slice(0, 40), slice(40, 64)]
+    assert ring.contour_of.tolist() == [0] * 40 + [1] * 24
+    e = ring.edges
+    assert e.shape == (64, 2)
+    assert [40 - 1, 0] in e.tolist() and [63, 40] in e.tolist()  # each loop closes on itself
+    assert not any(ring.contour_of[a] != ring.contour_of[b] for a, b in e)  # no bridge
+    assert_allclose(ring.contour(1).points, ring.points[40:])
+    assert ring.with_points(ring.points * 3).sizes == (40, 24)
+    assert "x2" in repr(ring)
+    open_ = Shape(ring.points, closed=False, contours=(40, 24))
+    assert len(open_.edges) == 62
+
+
+def test_one_contour_is_stored_as_none_and_behaves_as_before():
+    one = Shape(_ring().points[:40], contours=[40])
+    assert one.contours is None and one.sizes == (40,)
+    assert one.edges.tolist() == [[i, (i + 1) % 40] for i in range(40)]
+    cloud = Shape(np.random.default_rng(0).normal(size=(10, 3)))
+    assert cloud.sizes == () and cloud.edges.shape == (0, 2)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(contours=(40, 20)), "summing"),
+    (dict(contours=(62, 2)), "at least 3"),
+    (dict(contours=(32, 32), ordered=False), "ordered"),
+    (dict(contours="ab"), "node counts"),
+])
+def test_bad_contours_are_refused_by_name(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        Shape(_ring().points, **kwargs)
+
+
+def test_coarsen_and_spread_share_nodes_by_length():
+    from modalmorph.core.shape import coarsen, share, spread_indices
+    ring = _ring(200, 200)
+    assert share(ring, 30) == [19, 11]  # 3 each + 24 in proportion 2:1 (16, 8)
+    small = coarsen(ring, 30)
+    assert small.sizes == (19, 11)
+    sag = 1 - np.cos(np.pi / 200)  # resampled nodes lie on the 200-gon's chords
+    assert_allclose(np.linalg.norm(small.contour(0).points, axis=1), 2.0, rtol=sag)
+    assert_allclose(np.linalg.norm(small.contour(1).points, axis=1), 1.0, rtol=sag)
+    idx = spread_indices(ring, 30)
+    assert len(idx) == 30 and (ring.contour_of[idx] == 0).sum() == 19
+
+
+def test_check_contours_refuses_contours_that_cross_each_other():
+    from modalmorph.core.quality import check_contours
+    check_contours(_ring(), "ring")
+    ring = _ring()
+    moved = ring.points.copy()
+    moved[40:] += [1.5, 0.0]  # the hole pokes out through the outer boundary
+    with pytest.raises(ValueError, match="contour 0 crosses contour 1"):
+        check_contours(ring.with_points(moved), "ring")

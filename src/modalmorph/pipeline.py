@@ -102,7 +102,10 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
     Parameters
     ----------
     source, target : Shape or array_like, shape (m, d) and (n, d)
-        The objects at times t and t+1, both 2D or both 3D.
+        The objects at times t and t+1, both 2D or both 3D. Shapes of several contours
+        (``Shape(points, contours=...)``): every source contour is pulled onto its
+        partner target contour alone and measured against it (method.md §2, "Objects of
+        several contours"); contours without a partner are named in ``message``.
     matching : Matching, array_like of int (K, 2), MatchOptions or None, optional
         Correspondences: a Matching of these two objects, given ``(source index, target
         index)`` pairs (recorded as a Matching of method ``"given"``), or the options to

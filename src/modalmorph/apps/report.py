@@ -110,13 +110,15 @@ def result_payload(result, *, title: str | None = None, images: dict | None = No
         (T+1,: a morph's mean distance of matched pairs per step, a track's distance of
         the tracked shape to each frame), ``distance`` and ``tolerance`` (a morph's stop
         test, the one ``converged`` reports; None for a track), ``source`` and ``target``
-        points with ``source_closed`` and ``target_closed``, ``faces`` and
+        points with ``source_closed`` and ``target_closed``, ``source_contours`` and
+        ``target_contours`` (node counts of their contours, None for one), ``faces`` and
         ``target_faces`` (triangles (f, 3) of 3D surfaces, None for contours and point
         clouds; ``faces`` are those of every drawn shape), ``pairs`` (K, 2),
         ``parameters``, ``converged``,
         ``stop_reason``, ``modalmorph_version`` and ``y_up`` (coordinates not from an
         image or SVG: drawn with y up); for a morph also ``loads``
-        (T+1, m, d); for a track ``frames`` (the observed object of every frame).
+        (T+1, m, d); for a track ``frames`` (the observed object of every frame) and
+        ``frame_contours``.
         Non-finite numbers are None.
     """
 
@@ -142,6 +144,7 @@ def result_payload(result, *, title: str | None = None, images: dict | None = No
         first, last = result.frames[0], result.frames[-1]
         payload.update(
             mean_distance=_array(result.distance), frames=[_points(f) for f in result.frames],
+            frame_contours=[_contours(f) for f in result.frames],
             names=list(result.names), pairs=[], converged=True, distance=None,
             tolerance=None, stop_reason=f"{result.n_frames} frames of {shapes.shape[1]} nodes")
     else:
@@ -158,10 +161,17 @@ def result_payload(result, *, title: str | None = None, images: dict | None = No
                    source=source, target=_points(last),
                    source_closed=bool(getattr(first, "closed", True)),
                    target_closed=bool(getattr(last, "closed", True)),
+                   source_contours=_contours(first), target_contours=_contours(last),
                    # the drawn shapes have the nodes, so the triangles, of the first
                    faces=_faces(first) if len(source) == shapes.shape[1] else None,
                    target_faces=_faces(last))
     return payload
+
+
+def _contours(shape) -> list | None:
+    """The node counts of a shape's contours; None for one contour."""
+    contours = getattr(shape, "contours", None)
+    return None if contours is None else list(contours)
 
 
 def _faces(shape) -> list | None:

@@ -73,6 +73,7 @@ class AppState:
         pts = np.asarray(shape.points)
         return {"id": sid, "name": name, "points": pts.tolist(), "dim": int(pts.shape[1]),
                 "closed": bool(shape.closed), "image": image,
+                "contours": None if shape.contours is None else list(shape.contours),
                 "faces": None if shape.faces is None else shape.faces.tolist(),
                 "y_up": shape.frame is None or not shape.frame.y_down}
 

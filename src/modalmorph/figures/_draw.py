@@ -115,30 +115,37 @@ def check_frames(frames):
 
 
 def describe(shape, name: str):
-    """(points (m, d), closed, ordered, faces) of a Shape-like object or a bare array."""
+    """(points (m, d), closed, ordered, faces, sizes) of a Shape-like object or a bare
+    array; ``sizes`` are the node counts of its contours (``None``: one contour)."""
     if hasattr(shape, "points"):
         pts = np.asarray(shape.points, dtype=np.float64)
         faces = getattr(shape, "faces", None)
         closed = bool(getattr(shape, "closed", True))
         ordered = getattr(shape, "ordered", None)
+        sizes = getattr(shape, "contours", None)
     else:
         pts = np.asarray(shape, dtype=np.float64)
-        faces, closed, ordered = None, True, None
+        faces, closed, ordered, sizes = None, True, None, None
     if pts.ndim != 2 or pts.shape[1] not in (2, 3):
         raise ValueError(f"{name} must have shape (m, 2) or (m, 3), got {pts.shape}")
     if ordered is None:
         ordered = pts.shape[1] == 2
-    return pts, closed, bool(ordered), None if faces is None else np.asarray(faces)
+    return pts, closed, bool(ordered), None if faces is None else np.asarray(faces), sizes
 
 
-def edges_of(m: int, closed: bool, ordered: bool, faces) -> np.ndarray:
-    """Node pairs (e, 2) to draw: the contour, the mesh edges, or none for a point cloud."""
+def edges_of(m: int, closed: bool, ordered: bool, faces, sizes=None) -> np.ndarray:
+    """Node pairs (e, 2) to draw: each contour (of ``sizes`` nodes, in row order; none
+    joining one contour to the next), the mesh edges, or none for a point cloud."""
     if faces is not None and len(faces):
         e = np.vstack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
         return np.unique(np.sort(e, axis=1), axis=0)
     if ordered:
-        i = np.arange(m if closed else m - 1)
-        return np.column_stack([i, (i + 1) % m])
+        parts = []
+        for start, k in zip(np.cumsum([0, *(sizes or (m,))[:-1]]), sizes or (m,),
+                            strict=True):
+            i = np.arange(k if closed else k - 1)
+            parts.append(start + np.column_stack([i, (i + 1) % k]))
+        return np.vstack(parts)
     return np.empty((0, 2), dtype=int)
 
 

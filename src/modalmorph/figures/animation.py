@@ -158,12 +158,12 @@ class _Scene:
 
     def __init__(self, morph, color_by, *, background: bool, dpi: int):
         shapes = np.asarray(morph.shapes, dtype=np.float64)
-        _, closed, ordered, faces = describe(morph.source, "morph.source")
+        _, closed, ordered, faces, sizes = describe(morph.source, "morph.source")
         self.shapes, self.last = shapes, len(shapes) - 1
         self.names = getattr(morph, "names", None)
         self.dt = getattr(getattr(morph, "options", None), "dt", None)
         self.faces = faces if faces is not None and len(faces) else None
-        self.edges = edges_of(shapes.shape[1], closed, ordered, None)
+        self.edges = edges_of(shapes.shape[1], closed, ordered, None, sizes)
         self.values = np.zeros(shapes.shape[:2]) if color_by is None else \
             node_values(morph, color_by)
         scale = None if color_by is None else colormap(color_by, self.values)
@@ -214,15 +214,15 @@ def _faint_ends(ax, start, source, target, names=None) -> list:
     (labelled by the first and last frames' ``names`` for a track)."""
     from matplotlib.lines import Line2D
 
-    _, s_closed, s_ordered, _ = describe(source, "morph.source")
-    tgt, t_closed, t_ordered, _ = describe(target, "morph.target")
+    _, s_closed, s_ordered, _, s_sizes = describe(source, "morph.source")
+    tgt, t_closed, t_ordered, _, t_sizes = describe(target, "morph.target")
     first, last = ("source", "target") if names is None else (names[0], names[-1])
     handles = []
-    for pts, closed, ordered, color, marker, label in (
-        (start, s_closed, s_ordered, SOURCE_COLOR, "o", first),
-        (tgt, t_closed, t_ordered, TARGET_COLOR, "s", last),
+    for pts, closed, ordered, sizes, color, marker, label in (
+        (start, s_closed, s_ordered, s_sizes, SOURCE_COLOR, "o", first),
+        (tgt, t_closed, t_ordered, t_sizes, TARGET_COLOR, "s", last),
     ):
-        e = edges_of(len(pts), closed, ordered, None)
+        e = edges_of(len(pts), closed, ordered, None, sizes)
         if len(e):
             ax.add_collection(line_collection(pts[e], ax, colors=color, linewidths=0.9,
                                               alpha=0.35, zorder=1))

@@ -128,8 +128,8 @@ def plot_matches(source, target, pairs, *, background: bool = True, ax=None):
     -------
     matplotlib.axes.Axes
     """
-    src, s_closed, s_ordered, _ = describe(source, "source")
-    tgt, t_closed, t_ordered, _ = describe(target, "target")
+    src, s_closed, s_ordered, _, s_sizes = describe(source, "source")
+    tgt, t_closed, t_ordered, _, t_sizes = describe(target, "target")
     if src.shape[1] != tgt.shape[1]:
         raise ValueError(f"source and target must have the same dimension, got "
                          f"{src.shape[1]} and {tgt.shape[1]}")
@@ -143,11 +143,11 @@ def plot_matches(source, target, pairs, *, background: bool = True, ax=None):
     segs = np.stack([src[pairs[:, 0]], tgt[pairs[:, 1]]], axis=1)
     ax.add_collection(line_collection(segs, ax, colors=MATCH_COLOR, linewidths=0.6,
                                       zorder=1))
-    for pts, closed, ordered, color, marker, who in (
-        (src, s_closed, s_ordered, SOURCE_COLOR, "o", "source"),
-        (tgt, t_closed, t_ordered, TARGET_COLOR, "s", "target"),
+    for pts, closed, ordered, sizes, color, marker, who in (
+        (src, s_closed, s_ordered, s_sizes, SOURCE_COLOR, "o", "source"),
+        (tgt, t_closed, t_ordered, t_sizes, TARGET_COLOR, "s", "target"),
     ):
-        edges = edges_of(len(pts), closed, ordered, None)  # contours only: meshes clutter
+        edges = edges_of(len(pts), closed, ordered, None, sizes)  # contours: meshes clutter
         if len(edges):
             ax.add_collection(line_collection(pts[edges], ax, colors=color, linewidths=0.8,
                                               alpha=0.6, zorder=2))
@@ -197,7 +197,7 @@ def plot_shapes(morph, *, color_by="energy", every: int = 1, frames: str = "time
     check_every(every)
     check_frames(frames)
     shapes = np.asarray(morph.shapes, dtype=np.float64)
-    _, closed, ordered, faces = describe(morph.source, "morph.source")
+    _, closed, ordered, faces, sizes = describe(morph.source, "morph.source")
     tgt, *_ = describe(morph.target, "morph.target")
     ax = check_axes(ax, shapes.shape[2])
     view = view_of(morph.target, morph.source, background=background)
@@ -206,7 +206,7 @@ def plot_shapes(morph, *, color_by="energy", every: int = 1, frames: str = "time
     scale = colormap(color_by, values)
     cmap, norm = scale.cmap, scale.norm
     drawn = _drawn_steps(len(shapes), every, frames, morph)
-    edges = edges_of(shapes.shape[1], closed, ordered, faces)
+    edges = edges_of(shapes.shape[1], closed, ordered, faces, sizes)
     contour = faces is None and len(edges) > 0
     lines = _step_lines(ax, shapes, values, drawn, edges if contour else None)
     lines.set(cmap=cmap, norm=norm)
@@ -265,11 +265,11 @@ def _draw_surface(ax, points, faces, values, cmap, norm):
 def _draw_ends(ax, target, start, tgt) -> bool:
     """The source's nodes (step 0) and the target (dashed contour and nodes) on top;
     whether the target was drawn as a line."""
-    _, t_closed, t_ordered, t_faces = describe(target, "morph.target")
+    _, t_closed, t_ordered, t_faces, t_sizes = describe(target, "morph.target")
     dim = start.shape[1]
     size = 9 if dim == 2 else 5
     ax.scatter(*start.T, s=size, c=SOURCE_COLOR, marker="o", linewidths=0, zorder=4)
-    t_edges = edges_of(len(tgt), t_closed, t_ordered, t_faces)
+    t_edges = edges_of(len(tgt), t_closed, t_ordered, t_faces, t_sizes)
     if len(t_edges) and t_faces is None:
         ax.add_collection(line_collection(tgt[t_edges], ax, colors=TARGET_COLOR,
                                           linewidths=1.0, linestyles="--", zorder=4))

@@ -75,8 +75,8 @@ def plot_trajectories(track, *, every: int = 1, background: bool = True, ax=None
     lines.set_norm(mpl.colors.Normalize(0, n_frames - 1))
     ax.add_collection(lines)
     for f, color in ((0, SOURCE_COLOR), (n_frames - 1, TARGET_COLOR)):
-        pts, closed, ordered, faces = describe(track.shape(f), "track")
-        edges = edges_of(m, closed, ordered, faces)
+        pts, closed, ordered, faces, sizes = describe(track.shape(f), "track")
+        edges = edges_of(m, closed, ordered, faces, sizes)
         if len(edges) and faces is None:
             ax.add_collection(line_collection(pts[edges], ax, colors=color, linewidths=0.8,
                                               zorder=3))

@@ -241,8 +241,11 @@ def _reader(path: Path, name: str, options: ReadOptions) -> Reader:
                              f"{', '.join(SUPPORTED_EXTENSIONS)}")
     if path.stat().st_size == 0:
         raise InputFileError(f"{name}: the file is empty")
-    if options.threshold is not None and READERS[ext] not in (read_image, read_nifti):
-        raise InputFileError(f"{name}: threshold= applies to images only, not {ext} files")
+    for option in ("threshold", "label"):
+        if getattr(options, option) is not None and READERS[ext] not in (read_image,
+                                                                          read_nifti):
+            raise InputFileError(f"{name}: {option}= applies to images only, not {ext} "
+                                 f"files")
     return READERS[ext]
 
 

@@ -28,7 +28,7 @@ FPS = 24.0  # steps shown per second of the animation: a film's frame rate
 
 _FLOAT, _UINT = 5126, 5125  # accessor component types (glTF 2.0 §3.6.2)
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963  # bufferView targets
-_POINTS, _LINE_LOOP, _LINE_STRIP, _TRIANGLES = 0, 2, 3, 4  # primitive modes
+_POINTS, _LINES, _LINE_LOOP, _LINE_STRIP, _TRIANGLES = 0, 1, 2, 3, 4  # primitive modes
 _JSON_CHUNK, _BIN_CHUNK = 0x4E4F534A, 0x004E4942  # GLB chunk types
 
 
@@ -36,8 +36,9 @@ def write_gltf(morph, path, *, fps: float = FPS, name: str = "morph") -> Path:
     """Write a morph as one binary glTF 2.0 file with morph targets (see the module).
 
     Step 0 (the source) is the mesh's positions; target ``j - 1`` holds the displacement
-    ``shapes[j] - shapes[0]`` of step ``j`` (j = 1..T). Surfaces are triangles, contours
-    line loops (closed) or strips, point clouds points; 2D shapes lie in z = 0.
+    ``shapes[j] - shapes[0]`` of step ``j`` (j = 1..T). Surfaces are triangles, a contour
+    a line loop (closed) or strip, several contours lines (their segments, each contour
+    its own loop), point clouds points; 2D shapes lie in z = 0.
 
     Parameters
     ----------
@@ -102,8 +103,9 @@ def _document(shapes: np.ndarray, source, fps: float, name: str) -> tuple[dict, 
     primitive = {"attributes": {"POSITION": buf.add(base, "VEC3", target=_ARRAY_BUFFER,
                                                     bounds=True)}}
     primitive["mode"] = _mode(source)
-    if primitive["mode"] == _TRIANGLES:
-        indices = np.asarray(source.faces, dtype=np.uint32).reshape(-1)
+    if primitive["mode"] in (_TRIANGLES, _LINES):
+        pairs = source.faces if primitive["mode"] == _TRIANGLES else source.edges
+        indices = np.asarray(pairs, dtype=np.uint32).reshape(-1)
         primitive["indices"] = buf.add(indices, "SCALAR", target=_ELEMENT_ARRAY_BUFFER)
     mesh = {"name": name, "primitives": [primitive]}
     doc = {"asset": {"version": "2.0", "generator": f"modalmorph {__version__}"},
@@ -132,6 +134,8 @@ def _mode(source) -> int:
     """The primitive mode of the source's topology."""
     if source.faces is not None and len(source.faces):
         return _TRIANGLES
+    if source.ordered and len(source.sizes) > 1:
+        return _LINES  # several contours: no segment from one to the next
     if source.ordered:
         return _LINE_LOOP if source.closed else _LINE_STRIP
     return _POINTS

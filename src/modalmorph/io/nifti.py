@@ -73,10 +73,36 @@ def _load(path: Path, name: str):
     except ImportError:
         raise InputFileError(f"{name}: reading NIfTI files needs nibabel; install it with: "
                              f"pip install 'modalmorph[nifti]'") from None
+    said = _Said()
+    logger = logging.getLogger("nibabel.global")  # where nibabel says what it fixed
+    handlers = logger.handlers[:]
+    logger.handlers = [said]
     try:
-        return nibabel.load(path)
+        image = nibabel.load(path)
     except (OSError, ValueError, EOFError, nibabel.filebasedimages.ImageFileError) as exc:
-        raise InputFileError(f"{name}: cannot read the NIfTI file: {exc}") from None
+        raise InputFileError(f"{name}: cannot read the NIfTI file: {_line(exc)}") from None
+    finally:
+        logger.handlers = handlers
+    for text in said.lines:  # a spacing nibabel replaced by 1 is no spacing: refused
+        if "pixdim" in text:
+            raise InputFileError(f"{name}: the header's pixel spacing is invalid: {text}")
+        _log.info("%s: nibabel: %s", name, text)
+    return image
+
+
+class _Said(logging.Handler):
+    """Keeps the lines logged (nibabel's header fixes), instead of printing them."""
+
+    def __init__(self):
+        super().__init__()
+        self.lines = []
+
+    def emit(self, record):
+        self.lines.append(_line(record.getMessage()))
+
+
+def _line(exc: Exception) -> str:
+    return " ".join(str(exc).split())  # nibabel's messages run over several lines
 
 
 def _spacing(image, name: str) -> tuple[float, float]:
@@ -103,7 +129,7 @@ def _slices(path: Path, name: str) -> tuple[list[np.ndarray], tuple[float, float
         axes = "".join(nibabel.aff2axcodes(image.affine)[:2])
         data = np.asanyarray(image.dataobj)
     except (OSError, ValueError, EOFError, MemoryError) as exc:
-        raise InputFileError(f"{name}: cannot read the NIfTI data: {exc}") from None
+        raise InputFileError(f"{name}: cannot read the NIfTI data: {_line(exc)}") from None
     data = data.reshape(shape[0], shape[1], -1)  # (X, Y, frames)
     _log.info("%s: %d frame(s) of %d x %d voxels, spacing %g x %g %s, voxel axes towards %s",
               name, data.shape[2], shape[0], shape[1], *spacing, unit, axes)

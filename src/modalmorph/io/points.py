@@ -3,13 +3,15 @@
 - text: one node per line, ``x, y`` or ``x, y, z``, separated by commas, tabs, semicolons
   or spaces (with semicolons a decimal comma is accepted). An optional first line of
   column names; if it names columns ``x`` and ``y`` (and ``z``), those columns are used
-  and others ignored. Blank lines and lines starting with ``#`` are skipped.
+  and others ignored, but a ``contour`` column: the contour of each node (a shape of
+  several contours, a ring's outer boundary and hole; each contour's rows consecutive).
+  Blank lines and lines starting with ``#`` are skipped.
 - ``.npy``: an (m, 2) or (m, 3) array; ``.npz``: the array ``points`` (or the only array
-  in the file), and optionally ``faces`` and ``closed``.
+  in the file), and optionally ``faces``, ``closed`` and ``contours`` (node counts).
 - ``.json``: a list ``[[x, y], ...]`` or an object ``{"points": [...], "closed": bool,
-  "faces": [[i, j, k], ...]}`` (``closed`` and ``faces`` optional).
+  "faces": [[i, j, k], ...], "contours": [n0, n1, ...]}`` (all but ``points`` optional).
 
-:func:`write_points` writes the same formats back, exactly.
+:func:`write_points` writes the same formats back, exactly (``.npy``: the points only).
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from ..options import ReadOptions
 from .atomic import atomic_write
 from .base import RawShape
 
-__all__ = ["TEXT_SEPARATORS", "WRITABLE", "load_npy", "npz_arrays", "parse_float",
+__all__ = ["TEXT_SEPARATORS", "WRITABLE", "contour_runs", "load_npy", "npz_arrays", "parse_float",
            "read_json", "read_npy", "read_npz", "read_text", "write_points"]
 
 # The text formats written, with their column separator (any is read).
@@ -60,18 +62,14 @@ def read_text(path: Path, name: str, options: ReadOptions) -> RawShape:
         parts = [p.strip() for p in parts]
         return [p.replace(",", ".") for p in parts] if sep == ";" else parts
 
-    columns = None  # indices of x, y[, z] when a header names them
-    header_line, header = lines[0][0], fields(first)
+    columns = None  # indices of x, y[, z] (then contour) when a header names them
+    header = fields(first)
+    names = [h.strip("\"'").strip().lower() for h in header]
     if not any(_is_number(f) for f in header):
+        columns = _named_columns(name, names, lines[0][0])
         lines = lines[1:]
         if not lines:
             raise InputFileError(f"{name}: the file has a header line but no data")
-        names = [h.strip("\"'").strip().lower() for h in header]
-        if "x" in names and "y" in names:
-            columns = [names.index(c) for c in ("x", "y", "z") if c in names]
-        elif len(names) not in (2, 3):
-            raise InputFileError(f"{name}: line {header_line} (header) has {len(names)} "
-                                 f"columns, expected 2 or 3 (x, y[, z])")
 
     rows, width = [], None
     for lineno, line in lines:
@@ -99,7 +97,45 @@ def read_text(path: Path, name: str, options: ReadOptions) -> RawShape:
             raise InputFileError(f"{name}: line {lineno}: non-finite coordinates "
                                  f"({', '.join(parts)})")
         rows.append(row)
-    return RawShape(np.array(rows, dtype=np.float64))
+    table = np.array(rows, dtype=np.float64)
+    if columns is not None and "contour" in names:
+        return RawShape(table[:, :-1], contours=contour_runs(name, table[:, -1]))
+    return RawShape(table)
+
+
+def _named_columns(name: str, names: list, line: int) -> list | None:
+    """Indices of the columns ``x``, ``y`` (``z``, ``contour``) a header names, None when
+    it names no x and y (then 2 or 3 columns, in order)."""
+    if "x" in names and "y" in names:
+        return [names.index(c) for c in ("x", "y", "z", "contour") if c in names]
+    if len(names) not in (2, 3):
+        raise InputFileError(f"{name}: line {line} (header) has {len(names)} columns, "
+                             f"expected 2 or 3 (x, y[, z])")
+    return None
+
+
+def contour_runs(name: str, ids: np.ndarray) -> tuple[int, ...] | None:
+    """Node counts of the contours named by a ``contour`` column (one run of consecutive
+    rows each), None for one contour."""
+    starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
+    values = ids[starts]
+    if len(np.unique(values)) < len(values):
+        again = next(v for k, v in enumerate(values) if v in values[:k])
+        raise InputFileError(f"{name}: the rows of contour {again:g} are not consecutive "
+                             f"(row {starts[list(values).index(again, 1)] + 1} of the data "
+                             f"starts it again)")
+    sizes = np.diff(np.r_[starts, len(ids)])
+    return tuple(int(k) for k in sizes) if len(sizes) > 1 else None
+
+
+def _checked(contours, m: int) -> tuple[int, ...] | None:
+    """Node counts given with an array, checked to split its ``m`` rows."""
+    if contours is None or len(contours) < 2:
+        return None
+    if sum(contours) != m or min(contours) < 1:
+        raise ShapeError(f"contours must be node counts summing to the {m} points, got "
+                         f"{list(contours)}")
+    return tuple(int(k) for k in contours)
 
 
 def _is_number(text: str) -> bool:
@@ -143,12 +179,14 @@ def read_npy(path: Path, name: str, options: ReadOptions) -> RawShape:
 
 def read_npz(path: Path, name: str, options: ReadOptions) -> RawShape:
     """An .npz file's ``points`` (or only) array, its ``faces`` and ``closed``."""
-    points, faces, closed = npz_arrays(path, name)
-    return RawShape(_numeric(name, points, "'points'"), faces=faces, closed=closed)
+    points, faces, closed, contours = npz_arrays(path, name)
+    return RawShape(_numeric(name, points, "'points'"), faces=faces, closed=closed,
+                    contours=contours)
 
 
 def npz_arrays(path: Path, name: str):
-    """An .npz file's ``points`` (or only) array as it is, its ``faces`` and ``closed``."""
+    """An .npz file's ``points`` (or only) array as it is, its ``faces``, ``closed`` and
+    ``contours``."""
     def load(p):
         with open(p, "rb") as fh, np.load(fh, allow_pickle=False) as data:
             return {key: data[key] for key in data.files}
@@ -169,7 +207,21 @@ def npz_arrays(path: Path, name: str):
         closed = bool(closed)
     if faces is not None:
         faces = _faces(name, faces)
-    return points, faces, closed
+    contours = arrays.get("contours") if "points" in arrays else None
+    return points, faces, closed, _contours(name, contours)
+
+
+def _contours(name: str, counts) -> tuple[int, ...] | None:
+    """Node counts of contours as read (a list or an array), checked to be integers;
+    their sum is checked with the shape."""
+    if counts is None:
+        return None
+    counts = np.asarray(counts, dtype=object if isinstance(counts, list) else None)
+    if counts.ndim != 1 or not len(counts) or not all(
+            isinstance(k, int | np.integer) and not isinstance(k, bool) for k in counts):
+        raise InputFileError(f"{name}: contours must be a list of node counts (integers), "
+                             f"got {counts.tolist()!r:.60}")
+    return tuple(int(k) for k in counts) if len(counts) > 1 else None
 
 
 def _faces(name: str, faces) -> np.ndarray:
@@ -196,7 +248,7 @@ def read_json(path: Path, name: str, options: ReadOptions) -> RawShape:
         raise InputFileError(f"{name}: not valid JSON: {exc}") from None
     except RecursionError:
         raise InputFileError(f"{name}: not readable JSON: nested too deeply") from None
-    closed = faces = None
+    closed = faces = contours = None
     if isinstance(data, dict):
         if "points" not in data:
             raise InputFileError(f"{name}: the JSON object has no \"points\" (keys: "
@@ -206,6 +258,7 @@ def read_json(path: Path, name: str, options: ReadOptions) -> RawShape:
             raise InputFileError(f"{name}: \"closed\" must be true or false, got {closed!r}")
         if data.get("faces") is not None:
             faces = _faces(name, data["faces"])
+        contours = _contours(name, data.get("contours"))
         data = data["points"]
     if not isinstance(data, list) or not all(isinstance(row, list) for row in data):
         raise InputFileError(f"{name}: expected a list of [x, y] or [x, y, z] lists")
@@ -223,21 +276,26 @@ def read_json(path: Path, name: str, options: ReadOptions) -> RawShape:
             if isinstance(value, int) and not -1e308 < value < 1e308:
                 raise InputFileError(f"{name}: node {k}: an integer of {len(str(value))} digits "
                                      f"is too large for a coordinate")
-    return RawShape(np.array(data, dtype=np.float64), faces=faces, closed=closed)
+    return RawShape(np.array(data, dtype=np.float64), faces=faces, closed=closed,
+                    contours=contours)
 
 
-def write_points(path, points) -> None:
+def write_points(path, points, *, contours=None) -> None:
     """Write nodes to a file, the format chosen by its extension, atomically.
 
     Parameters
     ----------
     path : str or os.PathLike
-        ``.csv`` (header ``x,y`` or ``x,y,z``), ``.tsv`` (tab-separated, same header),
-        ``.txt`` (space-separated, same header), ``.npy`` (the array), ``.npz`` (array
-        ``points``, plus ``faces`` and ``closed`` for a :class:`Shape`) or ``.json``
-        (``{"points": [[x, y], ...]}``, plus ``"closed"`` and ``"faces"`` for a
-        :class:`Shape`). Numbers are written exactly (shortest round-trip form).
+        ``.csv`` (header ``x,y`` or ``x,y,z``, and ``contour`` for a :class:`Shape` of
+        several contours), ``.tsv`` (tab-separated, same header), ``.txt``
+        (space-separated, same header), ``.npy`` (the array), ``.npz`` (array ``points``,
+        plus ``faces``, ``closed`` and ``contours`` for a :class:`Shape`) or ``.json``
+        (``{"points": [[x, y], ...]}``, plus ``"closed"``, ``"faces"`` and ``"contours"``
+        for a :class:`Shape`). Numbers are written exactly (shortest round-trip form).
     points : array_like, shape (m, 2) or (m, 3), or Shape
+    contours : sequence of int, optional
+        For an array: the node counts of its contours, written as a :class:`Shape`'s
+        (a ``contour`` column, ``"contours"``); a Shape has its own.
 
     Raises
     ------
@@ -256,23 +314,28 @@ def write_points(path, points) -> None:
     if ext not in WRITABLE:
         raise ValueError(f"{name}: cannot write {path.suffix!r} files; supported: "
                          f"{', '.join(WRITABLE)}")
+    contours = shape.contours if shape is not None else _checked(contours, len(pts))
     with atomic_write(path) as tmp:
         if ext in TEXT_SEPARATORS:
             sep = TEXT_SEPARATORS[ext]
-            header = sep.join("xyz"[: pts.shape[1]])
-            body = "".join(sep.join(repr(float(v)) for v in row) + "\n" for row in pts)
-            tmp.write_text(header + "\n" + body, encoding="utf-8")
+            names = ["x", "y", "z"][: pts.shape[1]] + (["contour"] if contours else [])
+            ids = ([[repr(int(k))] for k in np.repeat(np.arange(len(contours)), contours)]
+                   if contours else [[]] * len(pts))
+            body = "".join(sep.join([*(repr(float(v)) for v in row), *c]) + "\n"
+                           for row, c in zip(pts, ids, strict=True))
+            tmp.write_text(sep.join(names) + "\n" + body, encoding="utf-8")
         elif ext == ".npy":
             np.save(tmp, pts)
         elif ext == ".npz":
-            extra = {}
+            extra = {"contours": np.array(contours)} if contours else {}
             if shape is not None:
                 extra["closed"] = np.bool_(shape.closed)
                 if shape.faces is not None:
                     extra["faces"] = shape.faces
             np.savez(tmp, points=pts, **extra)
         else:
-            data = {"points": pts.tolist()}
+            data = {"points": pts.tolist(), **({"contours": list(contours)} if contours
+                                               else {})}
             if shape is not None:
                 data["closed"] = bool(shape.closed)
                 if shape.faces is not None:

@@ -63,8 +63,15 @@ def save_result(morph, out_dir, *, options: dict | None = None,
             node_energy=np.asarray(morph.node_energy, dtype=np.float64),
             energy=np.asarray(morph.energy, dtype=np.float64),
             mean_distance=np.asarray(morph.mean_distance, dtype=np.float64),
-            pairs=_pairs_array(morph))
-    write_points(out_dir / "final_shape.csv", shapes[-1])
+            pairs=_pairs_array(morph), **_contours(morph.source))
+    write_points(out_dir / "final_shape.csv", shapes[-1],
+                 contours=getattr(morph.source, "contours", None))
+
+
+def _contours(source) -> dict:
+    """``{"contours": node counts}`` for a source of several contours, else nothing."""
+    contours = getattr(source, "contours", None)
+    return {"contours": np.array(contours, dtype=np.int64)} if contours else {}
 
 
 def result_summary(morph, *, options: dict | None = None, inputs: list | None = None) -> dict:
@@ -186,7 +193,7 @@ def save_track(track, out_dir, *, options: dict | None = None,
             cumulative_energy=track.cumulative_energy, strain=track.strain,
             distance=track.distance, edges=track.edges, edge_strain=track.edge_strain,
             segment_strain=track.segment_strain, segment_of_edge=track.segment_of_edge,
-            crossed=track.crossed)
+            crossed=track.crossed, **_contours(track.frames[0]))
     n_seg = track.segment_strain.shape[1]
     table = np.column_stack([np.arange(track.n_frames), track.strain, track.segment_strain])
     header = ",".join(["frame", "global", *[f"segment_{s + 1}" for s in range(n_seg)]])

@@ -22,7 +22,7 @@ from ..options import ReadOptions
 from .base import DEFAULT_NODES, extension, make_shape
 from .images import grey_levels, image_contours
 from .nifti import NIFTI_EXTENSIONS, nifti_frames, nifti_grid
-from .points import TEXT_SEPARATORS, load_npy, npz_arrays, parse_float
+from .points import TEXT_SEPARATORS, contour_runs, load_npy, npz_arrays, parse_float
 
 __all__ = ["Frames", "check_grids", "file_frames", "natural_key", "sequence_files"]
 
@@ -160,8 +160,9 @@ def _image_frames(images, pattern: str, options: ReadOptions):
 
 
 def _csv_frames(path: Path, name: str, options: ReadOptions, read):
-    """One frame per value of the ``frame`` column of a text file with a header; the file
-    as one frame (read with ``nodes`` only) when it has no such column."""
+    """One frame per value of the ``frame`` column of a text file with a header (a
+    ``contour`` column splits each frame into contours); the file as one frame (read with
+    ``nodes`` only) when it has no such column."""
     try:
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError:
@@ -174,7 +175,7 @@ def _csv_frames(path: Path, name: str, options: ReadOptions, read):
     if "x" not in header or "y" not in header:
         raise InputFileError(f"{name}: a 'frame' column needs 'x' and 'y' columns too, got "
                              f"{header}")
-    cols = [header.index(c) for c in ("frame", "x", "y", "z") if c in header]
+    cols = [header.index(c) for c in ("frame", "x", "y", "z", "contour") if c in header]
     rows = []
     for lineno, line in enumerate(lines[1:], start=2):
         parts = line.split(sep)
@@ -186,5 +187,8 @@ def _csv_frames(path: Path, name: str, options: ReadOptions, read):
     table = np.array(rows).reshape(-1, len(cols))
     values = np.unique(table[:, 0])
     names = [f"{name}[frame {v:g}]" for v in values]
-    return names, [make_shape(n, table[table[:, 0] == v, 1:], nodes=options.nodes)
-                   for n, v in zip(names, values, strict=True)]
+    contour = "contour" in header  # the last column: each frame's contours
+    rows = [table[table[:, 0] == v, 1:] for v in values]
+    return names, [make_shape(n, r[:, :-1] if contour else r, nodes=options.nodes,
+                              contours=contour_runs(n, r[:, -1]) if contour else None)
+                   for n, r in zip(names, rows, strict=True)]

@@ -19,7 +19,8 @@ MESH_FORMATS = ("ply", "obj")
 def write_step_meshes(morph, out_dir, *, fmt: str = "ply", name: str = "morph") -> list[Path]:
     """Write ``{name}_{step:04d}.{fmt}``, the shape at every step, into ``out_dir``.
 
-    Surfaces keep the source's triangles; contours are lines in PLY (OBJ, as meshio
+    Surfaces keep the source's triangles; contours are lines in PLY (the segments of
+    each contour) (OBJ, as meshio
     writes it, holds triangles only: their nodes alone there); point clouds are vertices.
     2D shapes lie in z = 0. PLY files are binary, OBJ files text.
 
@@ -48,7 +49,7 @@ def write_step_meshes(morph, out_dir, *, fmt: str = "ply", name: str = "morph") 
     shapes = np.asarray(morph.shapes, dtype=np.float64)
     if shapes.shape[2] == 2:
         shapes = np.pad(shapes, ((0, 0), (0, 0), (0, 1)))
-    cells = _cells(morph.source, shapes.shape[1], fmt)
+    cells = _cells(morph.source, fmt)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
@@ -60,11 +61,10 @@ def write_step_meshes(morph, out_dir, *, fmt: str = "ply", name: str = "morph") 
     return paths
 
 
-def _cells(source, m: int, fmt: str) -> list:
+def _cells(source, fmt: str) -> list:
     """meshio cells of the source's topology in this format (int32: what PLY holds)."""
     if source.faces is not None and len(source.faces):
         return [("triangle", np.asarray(source.faces, dtype=np.int32))]
-    if source.ordered and fmt == "ply":
-        i = np.arange(m if source.closed else m - 1, dtype=np.int32)
-        return [("line", np.column_stack([i, (i + 1) % m]).astype(np.int32))]
+    if source.ordered and fmt == "ply":  # each contour's segments, none between them
+        return [("line", np.asarray(source.edges, dtype=np.int32))]
     return []

@@ -1,16 +1,17 @@
 """SVG drawings: the first outline drawn, sampled uniformly by arc length.
 
 The first ``<path>``, ``<polygon>``, ``<polyline>``, ``<circle>``, ``<ellipse>`` or
-``<rect>`` drawn (not in ``<defs>``; transforms applied; for a path with several subpaths,
-the first), read with svgelements. Closed if it ends with ``Z``, is a polygon, circle,
-ellipse or rect, or ends where it starts. Coordinates are the file's user units (before
-any ``viewBox`` scaling), y pointing down (:data:`SVG_FRAME`).
+``<rect>`` drawn (not in ``<defs>``; transforms applied), read with svgelements. A path of
+several subpaths (a glyph "o" or "B", a ring: an outline and its holes) gives a shape of
+as many contours, in the order drawn. Closed if every subpath ends with ``Z``, is a
+polygon, circle, ellipse or rect, or ends where it starts; a path mixing closed and open
+subpaths is refused. Coordinates are the file's user units (before any ``viewBox``
+scaling), y pointing down (:data:`SVG_FRAME`).
 """
 
 from __future__ import annotations
 
 import os
-import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -62,10 +63,20 @@ def read_svg(path: Path, name: str, options: ReadOptions) -> RawShape:
     drawn = [segs for segs in drawn if len(segs) > 1]
     if not drawn:
         raise InputFileError(f"{name}: the first <{tag}> has no segments")
-    if len(drawn) > 1:
-        warnings.warn(f"{name}: the <{tag}> has {len(drawn)} subpaths; using the first",
-                      stacklevel=3)
-    segments = drawn[0]
+    loops = [_sampled(se, segments) for segments in drawn]
+    closed = {c for _, c in loops}
+    if len(closed) > 1:
+        kinds = ", ".join("closed" if c else "open" for _, c in loops)
+        raise InputFileError(f"{name}: the <{tag}> mixes closed and open subpaths ({kinds}): "
+                             f"the contours of a shape are all closed or all open")
+    pts = [p for p, _ in loops]
+    return RawShape(np.vstack(pts), closed=closed.pop(), frame=SVG_FRAME,
+                    default_nodes=DEFAULT_NODES,
+                    contours=tuple(map(len, pts)) if len(pts) > 1 else None)
+
+
+def _sampled(se, segments) -> tuple[np.ndarray, bool]:
+    """One subpath's points, :data:`SVG_SAMPLES` per segment, and whether it closes."""
     t = np.linspace(0.0, 1.0, SVG_SAMPLES + 1)[1:]
     pts = np.vstack([np.array(segments[0].end)[None]]
                     + [seg.npoint(t) for seg in segments[1:]])
@@ -74,7 +85,7 @@ def read_svg(path: Path, name: str, options: ReadOptions) -> RawShape:
     pts = pts[keep]  # zero-length segments add nothing to the outline
     if len(pts) > 1 and np.allclose(pts[0], pts[-1], rtol=0, atol=1e-12 * np.abs(pts).max()):
         pts, closed = pts[:-1], True  # ends where it starts
-    return RawShape(pts, closed=closed, frame=SVG_FRAME, default_nodes=DEFAULT_NODES)
+    return pts, closed
 
 
 def _check_svg_source(se, element, where: str) -> None:

@@ -16,8 +16,8 @@ def write_vtk_series(morph, out_dir, *, name: str = "morph") -> Path:
     """Write one VTU file per step and a ParaView ``.pvd`` collection of them.
 
     Each ``{name}_{step:04d}.vtu`` holds the shape at that step (2D padded with z = 0)
-    with line cells for contours, triangles for surfaces or vertices for point clouds,
-    and point data ``load`` (vectors), ``energy`` (local strain energy) and
+    with line cells for contours (each its own loop), triangles for surfaces or vertices
+    for point clouds, and point data ``load`` (vectors), ``energy`` (local strain energy) and
     ``displacement`` (from the source). Open ``{name}.pvd`` in ParaView to play it.
 
     Parameters
@@ -76,7 +76,6 @@ def _vtk_cells(source, m: int) -> list:
     """meshio cells of the source's topology: triangles, lines or vertices."""
     if source.faces is not None and len(source.faces):
         return [("triangle", np.asarray(source.faces, dtype=np.int64))]
-    if source.ordered:
-        i = np.arange(m if source.closed else m - 1, dtype=np.int64)
-        return [("line", np.column_stack([i, (i + 1) % m]))]
+    if source.ordered:  # each contour's segments (the shape's edges), none between them
+        return [("line", np.asarray(source.edges, dtype=np.int64))]
     return [("vertex", np.arange(m, dtype=np.int64)[:, None])]

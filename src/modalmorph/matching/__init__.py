@@ -145,7 +145,8 @@ class Matching:
         m, n = self.nodes
         how = self.method if not self.modes else f"{self.method}, {self.modes} modes"
         turned = "" if self.similarity is None else ", with a similarity"
-        return f"Matching({len(self)} pairs of {m} -> {n} nodes, {how}{turned})"
+        parts = "" if self.contours is None else f", {len(self.contours)} contour pair(s)"
+        return f"Matching({len(self)} pairs of {m} -> {n} nodes, {how}{turned}{parts})"
 
     @classmethod
     def given(cls, pairs, m: int, n: int) -> Matching:
@@ -312,7 +313,10 @@ def match(source, target, *, options: MatchOptions | None = None, **overrides) -
         The two objects, of the same dimension ``d`` in {2, 3}; ``m`` and ``n`` may differ.
         Arrays become :class:`Shape` with its defaults (2D: closed ordered contour; 3D:
         unordered point cloud); pass a ``Shape`` for an open contour (``closed=False``)
-        or an unordered 2D set (``ordered=False``).
+        or an unordered 2D set (``ordered=False``). Shapes of several contours
+        (``Shape(points, contours=...)``; 2D contours or 3D polylines): partner
+        contours are found and matched pair by pair
+        (:mod:`~modalmorph.matching.contours`, ``Matching.contours``).
     options : MatchOptions, optional
         ``method`` (``"auto"``: the default matcher, invariant to translation, rotation,
         scale, start node and direction of a contour; ``"local"``, ``"global"``: the

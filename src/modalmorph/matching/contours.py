@@ -9,6 +9,7 @@ several contours (:attr:`Shape.contours`) is matched in three stages:
    with ``rotation="none"``) places the whole source. (All the nodes as one unordered
    2D set kept the common frame of a lobed ring turned by 40 or 160 degrees with
    ``rotation="auto"``; the largest contours find the turn: benchmarks/contours.py);
+   The same stages match 3D polylines of several contours;
 2. partner contours: an assignment (:func:`scipy.optimize.linear_sum_assignment`) over
    the two-way mean distance of each placed source contour to each target contour
    (:func:`pair_contours`); with unequal contour counts the extra contours stay
@@ -18,7 +19,8 @@ several contours (:attr:`Shape.contours`) is matched in three stages:
    turned on its own; the pairs are offset back to the rows of the whole objects.
 
 The paper's searches (``"local"``, ``"global"``) run over all the nodes; their partner
-contours are those that share the most pairs (:func:`partners_by_votes`), and pairs
+contours are those that share the most pairs
+(:func:`~modalmorph.core.dynamics.contour_partners`), and pairs
 joining other contours are dropped.
 """
 
@@ -33,7 +35,6 @@ from scipy.optimize import linear_sum_assignment
 from ..core.align import Similarity, align
 from ..core.quality import area, curve_distances
 from ..core.shape import Shape
-from ..errors import ShapeError
 
 __all__ = ["AREA_TIE", "keep_partners", "match_contours", "pair_contours",
            "unpaired_sentence"]
@@ -100,9 +101,6 @@ def match_contours(src: Shape, tgt: Shape, rotation: str, match_one: Callable):
     costs (K,), the similarity placing the source (Horn on all the pairs) and the
     partner contours (P, 2).
     """
-    if src.dim != 2:
-        raise ShapeError("shapes of several contours are matched in 2D only; match each "
-                         "3D polyline on its own (Shape.contour(k))")
     pose = object_pose(src, tgt, rotation, match_one)
     placed = pose.apply(src.points)
     partners = pair_contours(src, tgt, placed)

@@ -65,8 +65,11 @@ class Run:
         polyline, and of the target's nodes to the shape's polyline less what a shape of
         the source's node count leaves there (the target resampled evenly by arc length
         at ``m`` nodes: a source no finer than the target cannot follow its every
-        corner). For 3D point sets (unordered): the larger of the mean distances both ways
-        between the shape's nodes and the target's surface, less the target's own
+        corner); for objects of several contours, the largest of that measure over the
+        pairs of partner contours, each source contour against its partner alone
+        (contours without a partner left out). For 3D point sets (unordered): the larger
+        of the mean distances both ways between the shape's nodes and the target's
+        surface, less the target's own
         roughness (each point's distance to the plane of its 8 nearest points of the
         other set, and of the target's points to the plane of their 8 nearest other
         target points: what a sample of the target surface leaves; 0 when below), so that
