@@ -43,8 +43,9 @@ LAYERS = (
     ("core",),  # numbers: shape, material, element, modes, solvers, model, dynamics, ...
     ("options",),  # the one schema of every option
     ("simulation", "matching", "io", "figures"),  # time integration, matching, files, plots
-    ("pipeline", "datasets"),  # morph(): the method end to end; the bundled data
+    ("pipeline", "datasets", "phantoms"),  # morph(); the bundled data; strain phantoms
     ("tracking",),  # track(): sequences, frame by frame through morph()
+    ("cardiac",),  # strain(): myocardial strain from tracked walls
     ("",),  # the package's __init__: the public API
     ("apps",),  # command line, runs, batch, web app, report
     ("__main__",),

@@ -34,6 +34,7 @@ from .errors import OptionError
 
 __all__ = [
     "MatchOptions", "MorphOptions", "ReadOptions", "OutputOptions", "TrackOptions",
+    "StrainOptions",
     "OPTION_CLASSES", "REFERENCES", "CORRESPONDENCES", "flat_fields", "parameters", "split",
     "split_overrides", "parse_value", "METHODS", "ROTATIONS", "FREE_MOTIONS", "LOADS",
     "SCHEMES", "OBJECTS", "FRAME_SPACINGS", "STEP_MESHES", "K_RANGE", "DT_RANGE", "C_MAX",
@@ -351,6 +352,71 @@ class TrackOptions(_Options):
                 raise OptionError(f"{name} must be an integer >= {low}, got {value!r}")
 
 
+@dataclass(frozen=True)
+class StrainOptions(_Options):
+    """How :func:`modalmorph.strain` measures the wall of a myocardium sequence."""
+
+    segments: int = _opt(
+        6, "equal sectors by angle around the reference centre (6: the AHA mid-ventricular "
+        "segments); segment 0 is the whole wall", group="strain", kind="int")
+    reference_frame: int = _opt(
+        0, "frame the strains are measured against (end-diastole)", group="strain",
+        kind="int", flag="--reference")
+    reference_angle: float = _opt(
+        0.0, "where segment 1 starts, degrees counterclockwise from the image's +x axis as "
+        "the image is shown (y down); segments follow counterclockwise", group="strain",
+        kind="float")
+    rv_point: tuple | None = _opt(
+        None, "an RV insertion point x,y (image units) at the reference frame: segment 1 "
+        "starts one segment clockwise of it (the AHA anterior segment, from the anterior "
+        "insertion); overrides reference_angle", group="strain", kind="point")
+    rv_label: int | None = _opt(
+        None, "label images: the RV's label; segment 1 starts two segments clockwise of the "
+        "direction of the RV's centre at the reference frame (the septum, segments 2-3, "
+        "faces the RV); overrides reference_angle", group="strain", kind="int")
+    label: int | None = _opt(
+        None, "label images: the myocardium's label (default: every non-zero pixel)",
+        group="strain", kind="int")
+    object: str | int = _opt(
+        "largest", "several objects in a mask: largest, center (nearest the image centre) or "
+        "a label number (1 = the first in reading order)", group="strain", kind="object",
+        choices=OBJECTS)
+    endo_only: bool = _opt(
+        False, "masks of the blood pool or contours without an epicardium: endocardial "
+        "circumferential strain only", group="strain", kind="bool")
+    nodes: int = _opt(
+        64, "nodes per contour (endocardium, epicardium)", group="strain", kind="int")
+    frame_interval: float | None = _opt(
+        None, "seconds between frames: strain rates per second (default: per frame)",
+        group="strain", kind="float")
+    correspondence: str = _opt(
+        "nearest", "how the tracking pairs nodes between frames (as track's)",
+        group="strain", kind="str", choices=CORRESPONDENCES)
+
+    def _check(self):
+        for name, low in (("segments", 1), ("reference_frame", 0), ("nodes", 8)):
+            value = getattr(self, name)
+            if not (_is_int(value) and value >= low):
+                raise OptionError(f"{name} must be an integer >= {low}, got {value!r}")
+        if not _is_number(self.reference_angle):
+            raise OptionError(f"reference_angle must be a number (degrees), got "
+                              f"{self.reference_angle!r}")
+        for name in ("rv_label", "label"):
+            value = getattr(self, name)
+            if value is not None and not (_is_int(value) and value >= 0):
+                raise OptionError(f"{name} must be a label value >= 0, got {value!r}")
+        if self.frame_interval is not None and not (_is_number(self.frame_interval)
+                                                    and self.frame_interval > 0):
+            raise OptionError(f"frame_interval must be a number of seconds > 0, got "
+                              f"{self.frame_interval!r}")
+        if self.rv_point is not None and not (
+                isinstance(self.rv_point, tuple) and len(self.rv_point) == 2
+                and all(map(_is_number, self.rv_point))):
+            raise OptionError(f"rv_point must be two numbers (x, y), got {self.rv_point!r}")
+        if not isinstance(self.endo_only, bool):
+            raise OptionError(f"endo_only must be true or false, got {self.endo_only!r}")
+
+
 OPTION_CLASSES = (ReadOptions, MatchOptions, MorphOptions, OutputOptions)
 
 
@@ -411,9 +477,9 @@ def parse_value(name: str, kind: str, value):
     """A value of the given kind from text (the flags, the form) or from TOML.
 
     Kinds: ``bool``, ``int``, ``float``, ``str``; ``modes`` ("all", a count or a fraction
-    such as "2/3" or 0.66); ``damping`` (one or two numbers); ``material`` (a name or
-    three numbers E, nu, rho); ``object`` (largest, center or a label number). ``None``
-    and empty text give ``None`` (the default).
+    such as "2/3" or 0.66); ``damping`` (one or two numbers); ``point`` (two numbers x,y);
+    ``material`` (a name or three numbers E, nu, rho); ``object`` (largest, center or a
+    label number). ``None`` and empty text give ``None`` (the default).
     """
     if value is None or isinstance(value, str) and not value.strip():
         return None
@@ -447,6 +513,11 @@ def _typed(name, kind, value):
             return Material(*map(float, value), name="custom")
         raise OptionError(f"{name} must be one of {', '.join(MATERIALS)} or three numbers "
                           f"E nu rho, got {value!r}")
+    if kind == "point":
+        if not (isinstance(value, list | tuple) and len(value) == 2
+                and all(map(_is_number, value))):
+            raise OptionError(f"{name} must be two numbers x,y, got {value!r}")
+        return tuple(map(float, value))
     if kind == "damping" and isinstance(value, list | tuple):
         if len(value) not in (1, 2) or not all(map(_is_number, value)):
             raise OptionError(f"{name} takes one or two ratios, got {value!r}")

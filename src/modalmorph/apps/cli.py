@@ -1,5 +1,5 @@
-"""The ``modalmorph`` command line: ``demo``, ``match``, ``morph``, ``track``, ``batch``
-and ``app``.
+"""The ``modalmorph`` command line: ``demo``, ``match``, ``morph``, ``track``, ``strain``,
+``batch`` and ``app``.
 
 The option flags are generated from the fields of the option classes
 (:mod:`modalmorph.options`, :class:`modalmorph.options.AlignOptions`,
@@ -27,7 +27,7 @@ from ..io import atomic_output_dir, atomic_write
 from ..matching import match
 from ..options import MatchOptions, ReadOptions, flat_fields
 from ..version import __version__
-from . import batch
+from . import batch, strain
 from .app import serve
 from .runs import (
     BATCH_CLASSES,
@@ -183,6 +183,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "sequence by morphing the tracked shape onto each next frame; "
                           "write trajectories, strain energy and contour strain per frame, "
                           "figures and an animation."))
+    strain.register(command, add_option_flags)
     _batch_parser(command("batch", _run_batch, "many pairs and sequences, on this machine "
                           "or a Dask cluster", "Run morph (source,target pairs) and track "
                           "(frames) for every item of a manifest, each into OUT/<id>/ "
