@@ -197,7 +197,8 @@ def test_cli_writes_and_refuses(tmp_path, capsys):
     assert not (tmp_path / "o3" / "wall.png").exists()
     _save_pngs(tmp_path / "sizes", [ph.masks[0], ph.masks[1][:-2]])
     assert main(["strain", str(tmp_path / "sizes"), "--out", str(tmp_path / "o4")]) == 2
-    assert "different sizes" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "f1.png: the mask is 128 x 126 px" in err and "share one grid" in err
 
 
 def test_nifti_input(tmp_path, phantom):

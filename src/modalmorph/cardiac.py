@@ -40,12 +40,12 @@ from pathlib import Path
 import numpy as np
 
 from .core.shape import Shape, resample
-from .errors import InputFileError, OptionError, ShapeError
+from .errors import OptionError, ShapeError
 from .options import MatchOptions, MorphOptions, StrainOptions, TrackOptions
 from .tracking import track
 
 __all__ = ["Strain", "StrainOptions", "KINDS", "strain", "wall_strain", "mask_ring",
-           "read_masks", "DEFINITIONS"]
+           "DEFINITIONS"]
 
 log = logging.getLogger(__name__)
 
@@ -392,8 +392,11 @@ def _masks_of(frames, names):
         frames = [read_shape(p) for p in paths]
         names = tuple(Path(p).name for p in paths) if names is None else names
     elif paths:
-        masks, spacing, file_names = read_masks(paths)
-        names = file_names if names is None else names
+        from .io.masks import read_masks
+
+        read = read_masks(paths)
+        masks, spacing = read.frames, read.spacing
+        names = read.names if names is None else names
     elif isinstance(frames, np.ndarray) and frames.ndim == 3 or (
             isinstance(frames, Sequence) and len(frames) and
             all(isinstance(f, np.ndarray) and f.ndim == 2 and f.shape[1] != 2
@@ -410,77 +413,6 @@ def _masks_of(frames, names):
     if len(names) != n:
         raise ValueError(f"names must have one entry per frame ({n}), got {len(names)}")
     return masks, spacing, names, frames
-
-
-def read_masks(paths) -> tuple[np.ndarray, tuple, tuple]:
-    """``(masks (F, H, W), spacing (x, y), names)`` from mask files: a folder or list of
-    PNG/TIFF images (natural order), a multi-page TIFF, an NPY or NPZ (F, H, W) array, or
-    a NIfTI 2D+t image (``.nii``/``.nii.gz``, needs nibabel; its pixel spacing is kept).
-
-    Raises
-    ------
-    InputFileError
-        Unreadable files, images of different sizes or spacings.
-    """
-    from .io.sequences import natural_key
-
-    paths = [Path(paths)] if isinstance(paths, str | Path) else [Path(p) for p in paths]
-    if len(paths) == 1 and paths[0].is_dir():
-        paths = sorted((p for p in paths[0].iterdir() if p.suffix.lower() in
-                        (".png", ".tif", ".tiff", ".bmp")), key=natural_key)
-    frames, names, spacings = [], [], set()
-    for path in paths:
-        if not path.exists():
-            raise InputFileError(f"{path}: file not found")
-        stack, spacing = _read_stack(path)
-        spacings.add(spacing)
-        names += [path.name] if len(stack) == 1 else [f"{path.name}[{i}]"
-                                                       for i in range(len(stack))]
-        frames += list(stack)
-    sizes = sorted({f.shape for f in frames})
-    if len(sizes) > 1:
-        raise InputFileError(f"masks of different sizes: {sizes}; all frames must have one "
-                             f"size")
-    if len(spacings) > 1:
-        raise InputFileError(f"masks of different pixel spacings: {sorted(spacings)}")
-    return np.asarray(frames), spacings.pop(), tuple(names)
-
-
-def _read_stack(path: Path) -> tuple[np.ndarray, tuple]:
-    """The frames (k, H, W) of one file and its pixel spacing (x, y)."""
-    name = path.name.lower()
-    try:
-        if name.endswith((".nii", ".nii.gz")):
-            try:
-                import nibabel
-            except ImportError:
-                raise ImportError("reading NIfTI needs nibabel: pip install nibabel") \
-                    from None
-            img = nibabel.load(path)
-            data = np.asarray(img.dataobj)
-            zooms = img.header.get_zooms()
-            data = data.reshape(data.shape[0], data.shape[1], -1)  # (x, y, [1,] t)
-            return np.moveaxis(data, -1, 0).transpose(0, 2, 1), (float(zooms[0]),
-                                                                 float(zooms[1]))
-        if name.endswith(".npy"):
-            data = np.load(path)
-        elif name.endswith(".npz"):
-            with np.load(path) as npz:
-                data = npz["masks"] if "masks" in npz else npz[npz.files[0]]
-        else:
-            from PIL import Image, ImageSequence
-
-            with Image.open(path) as img:
-                data = np.array([np.asarray(page) for page in ImageSequence.Iterator(img)])
-    except (OSError, ValueError, KeyError) as exc:
-        raise InputFileError(f"{path}: cannot be read as masks ({exc})") from None
-    data = data[None] if data.ndim == 2 else data
-    if data.ndim == 4:  # colour images: any channel set
-        data = data[..., :3].max(axis=-1)
-    if data.ndim != 3:
-        raise InputFileError(f"{path}: masks must be 2D images or an (F, H, W) stack, got "
-                             f"shape {data.shape}")
-    return data, (1.0, 1.0)
 
 
 def mask_ring(mask, name: str, options: StrainOptions | None = None, *,

@@ -29,7 +29,7 @@ from ..options import ReadOptions
 from .base import DEFAULT_NODES, RawShape
 from .images import image_contours
 
-__all__ = ["NIFTI_EXTENSIONS", "nifti_frames", "nifti_grid", "read_nifti"]
+__all__ = ["NIFTI_EXTENSIONS", "nifti_frames", "nifti_grid", "nifti_slices", "read_nifti"]
 
 NIFTI_EXTENSIONS = (".nii", ".nii.gz")
 
@@ -39,7 +39,7 @@ _HEARING = threading.Lock()
 
 def read_nifti(path: Path, name: str, options: ReadOptions) -> RawShape:
     """The contours of the chosen object of a one-frame NIfTI file, in its spatial unit."""
-    slices, spacing, unit = _slices(path, name)
+    slices, spacing, unit = nifti_slices(path, name)
     if len(slices) > 1:
         raise InputFileError(f"{name}: a 2D+t volume of {len(slices)} frames: read it as a "
                              f"sequence (read_frames, modalmorph track)")
@@ -50,7 +50,7 @@ def read_nifti(path: Path, name: str, options: ReadOptions) -> RawShape:
 
 def nifti_frames(path: Path, name: str, options: ReadOptions) -> list[tuple[str, RawShape]]:
     """``(frame name, RawShape)`` of each frame of a NIfTI file (one for a 2D file)."""
-    slices, spacing, unit = _slices(path, name)
+    slices, spacing, unit = nifti_slices(path, name)
     if len(slices) == 1:
         return [(name, read_nifti(path, name, options))]
     out = []
@@ -118,7 +118,8 @@ def _spacing(image, name: str) -> tuple[float, float]:
     return zooms
 
 
-def _slices(path: Path, name: str) -> tuple[list[np.ndarray], tuple[float, float], str]:
+def nifti_slices(path: Path, name: str
+                 ) -> tuple[list[np.ndarray], tuple[float, float], str]:
     """The frames (H, W) = (Y, X) of a NIfTI file, its pixel spacing and spatial unit."""
     image = _load(path, name)
     shape = image.shape

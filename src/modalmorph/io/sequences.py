@@ -24,7 +24,8 @@ from .images import grey_levels, image_contours
 from .nifti import NIFTI_EXTENSIONS, nifti_frames, nifti_grid
 from .points import TEXT_SEPARATORS, contour_runs, load_npy, npz_arrays, parse_float
 
-__all__ = ["Frames", "check_grids", "file_frames", "natural_key", "sequence_files"]
+__all__ = ["Frames", "check_grids", "file_frames", "image_pages", "natural_key",
+           "sequence_files"]
 
 # The files that may hold several frames (by extension); any other is one frame.
 _STACKS = (".npy", ".npz")
@@ -90,7 +91,7 @@ def file_frames(path, options: ReadOptions,
             make_shape(n, raw.points, nodes=options.nodes or raw.default_nodes,
                        frame=raw.frame, contours=raw.contours) for n, raw in frames]
     if ext in _PAGED:
-        pages = _tiff_pages(path, name)
+        pages = image_pages(path, name)
         if len(pages) == 1:
             return [name], [read(path, options)]
         return _image_frames(pages, f"{name}[page {{}}]", options)
@@ -136,7 +137,8 @@ def check_grids(names, shapes, files=None) -> None:
                                  f"grid")
 
 
-def _tiff_pages(path: Path, name: str) -> list:
+def image_pages(path: Path, name: str) -> list:
+    """The grey levels (H, W) of every page of an image file (one for PNG)."""
     from PIL import Image, ImageSequence
 
     try:
