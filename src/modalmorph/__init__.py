@@ -22,11 +22,12 @@ _WHERE = {
     "Matching": "matching", "match": "matching", "MatchOptions": "options",
     "MorphOptions": "options", "TrackOptions": "options", "Morph": "pipeline",
     "morph": "pipeline", "Simulation": "simulation", "Track": "tracking", "track": "tracking",
-    "set_blas_threads": "threads",
+    "set_blas_threads": "threads", "Stance": "stance", "StanceOptions": "options",
+    "stance": "stance",
 }
 # subpackages and modules reachable as attributes (mm.io.read_frames, mm.figures, ...)
 _MODULES = ("apps", "core", "datasets", "errors", "figures", "io", "matching", "options",
-            "pipeline", "simulation", "threads", "tracking")
+            "pipeline", "simulation", "stance", "threads", "tracking")
 
 __all__ = ["__version__", *sorted(_WHERE)]
 

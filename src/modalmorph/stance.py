@@ -1,0 +1,353 @@
+"""``stance()``: every loaded part of a foot on a pressure plate, followed through the
+stance phase (dynamic pedobarography, the paper's home field).
+
+Contact starts with the heel; the forefoot and the toes touch down, parts merge (the
+midfoot joins heel and forefoot) and leave. Each frame's parts and their sub-sensor
+boundaries come from :func:`modalmorph.io.pressure.frame_parts`. Parts are linked
+between consecutive frames by overlap (shared loaded sensors): a part overlapping
+exactly one part of the previous frame, which overlaps nothing else, continues it; a part
+with no such link *appears*. Where parts merge or split, the parts before end and those
+after start as new *transitional objects* (the paper's term), and the events say so.
+Each part is followed from when it appears to when it leaves with its own nodes (as
+many as its largest boundary needs at ``spacing``), as :func:`modalmorph.track` does:
+the tracked shape of each frame is morphed (:func:`modalmorph.morph`) onto the next
+frame's boundary, here with an order-preserving cyclic correspondence, so the strain energy (22) of every frame's deformation is known per part
+and in all. Frames with nothing loaded at the start and the end are skipped, and said.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .core.quality import area, curve_distances, self_crossings
+from .core.shape import Shape, resample
+from .errors import InputFileError, MorphDivergedError, OptionError
+from .io.pressure import check_pressure, frame_parts, pressure_level
+from .options import MorphOptions, StanceOptions
+from .pipeline import morph
+
+__all__ = ["MIN_PART_NODES", "PartTrack", "Stance", "StanceOptions", "stance"]
+
+log = logging.getLogger(__name__)
+
+# Fewest nodes of a part's contour: a 2-sensor contact has a boundary of about 4 sensors,
+# 8 nodes at the default spacing of 0.5 sensor.
+MIN_PART_NODES = 8
+
+
+@dataclass(frozen=True, eq=False)
+class PartTrack:
+    """One loaded part followed from when it appears to when it leaves.
+
+    Attributes
+    ----------
+    part : int
+        Its number in the stance (0, 1, ... in order of appearance).
+    frames : ndarray of int, shape (F_p,)
+        The stance frames it is loaded in (consecutive).
+    labels : ndarray of int, shape (F_p,)
+        Its label in each frame's :class:`~modalmorph.io.pressure.FrameParts`.
+    points : ndarray, shape (F_p, m, 2)
+        Its tracked nodes (node ``i`` is the same material node in every frame), mm.
+    energy : ndarray, shape (F_p,)
+        Strain energy (22) of the deformation from its previous frame (0 at its first).
+    sensors : ndarray of int, shape (F_p,)
+        Loaded sensors.
+    area : ndarray, shape (F_p,)
+        Area inside its boundary, mm^2.
+    node_distance : ndarray, shape (F_p,)
+        Largest distance of a tracked node to the part's boundary, mm.
+    boundary_gap : ndarray, shape (F_p,)
+        Largest distance of a boundary point to the nearest tracked node, mm.
+    crossed : ndarray of bool, shape (F_p,)
+        Whether the tracked contour crosses itself.
+    start, end : str
+        How it began ("appears", "merge of parts 0, 1", "split of part 2", "first
+        frame") and ended ("leaves", "merges into part 4", "splits into parts 5, 6",
+        "last frame").
+    """
+
+    part: int
+    frames: np.ndarray
+    labels: np.ndarray
+    points: np.ndarray
+    energy: np.ndarray
+    sensors: np.ndarray
+    area: np.ndarray
+    node_distance: np.ndarray
+    boundary_gap: np.ndarray
+    crossed: np.ndarray
+    start: str = ""
+    end: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class Stance:
+    """Every loaded part of a stance phase, followed.
+
+    Attributes
+    ----------
+    pressure : ndarray, shape (F, H, W)
+        The frames kept (nothing-loaded frames at the ends skipped), array units.
+    frames : ndarray of int, shape (F,)
+        Their indices in the input stack.
+    level : float
+        Loaded above this, array units.
+    pixel_size : float
+        mm per sensor.
+    observed : tuple of FrameParts
+        Each frame's parts and boundaries.
+    parts : tuple of PartTrack
+        The parts, in order of appearance.
+    energy : ndarray, shape (F,)
+        Strain energy of every frame's deformation, summed over the parts.
+    part_energy : ndarray, shape (F, P)
+        The same per part (NaN where the part is not loaded).
+    events : tuple of str
+        What happened, in order ("frame 3: part 2 appears", ...).
+    params : dict
+        The options used.
+    """
+
+    pressure: np.ndarray
+    frames: np.ndarray
+    level: float
+    pixel_size: float
+    observed: tuple
+    parts: tuple
+    energy: np.ndarray
+    part_energy: np.ndarray
+    events: tuple
+    params: dict = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        return (f"Stance({len(self.frames)} frames, {len(self.parts)} parts, total energy "
+                f"{float(self.energy.sum()):.4g})")
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.frames)
+
+
+def stance(pressure, *, options: StanceOptions | None = None, name: str = "pressure",
+           morph_options: MorphOptions | None = None,
+           progress: Callable[[int, int], None] | None = None, **overrides) -> Stance:
+    """Follow every loaded part of a pressure stack through the stance phase.
+
+    Parameters
+    ----------
+    pressure : array_like, shape (T, H, W) or (H, W)
+        Pressure per sensor, in time order (rows and columns of the plate).
+    options : StanceOptions, optional
+        Level, sensor pitch, smoothing, node spacing, frame step.
+    name : str, optional
+        Names the input in messages.
+    morph_options : MorphOptions, optional
+        The morph of each frame (:func:`modalmorph.track`).
+    progress : callable, optional
+        Called as ``progress(done, total)`` after each part.
+    **overrides
+        :class:`StanceOptions` fields.
+
+    Returns
+    -------
+    Stance
+
+    Raises
+    ------
+    InputFileError
+        NaN or infinite values (naming the frame), nothing loaded, a threshold above
+        every value, or no part of ``min_sensors`` in any frame.
+    """
+    opts = _options(options, overrides)
+    stack = check_pressure(pressure, name)[::opts.every]
+    level = pressure_level(stack, threshold=opts.threshold, fraction=opts.fraction,
+                           name=name)
+    observed = [frame_parts(f, level, pixel_size=opts.pixel_size, smooth=opts.smooth,
+                            min_sensors=opts.min_sensors) for f in stack]
+    kept = _kept_frames(observed, name, opts)
+    observed = observed[kept[0]:kept[-1] + 1]
+    chains, events = _link(observed)
+    parts = []
+    for c, chain in enumerate(chains):
+        parts.append(_follow(c, chain, observed, opts, morph_options))
+        if progress is not None:
+            progress(c + 1, len(chains))
+    part_energy = np.full((len(observed), len(parts)), np.nan)
+    for p in parts:
+        part_energy[p.frames, p.part] = p.energy
+    for e in events:
+        log.info("%s: %s", name, e)
+    return Stance(pressure=stack[kept[0]:kept[-1] + 1], frames=kept * opts.every,
+                  level=level, pixel_size=float(opts.pixel_size), observed=tuple(observed),
+                  parts=tuple(parts), energy=np.nansum(part_energy, axis=1),
+                  part_energy=part_energy, events=tuple(events), params=opts.record())
+
+
+def _options(options, overrides: dict) -> StanceOptions:
+    if options is None:
+        options = StanceOptions()
+    elif not isinstance(options, StanceOptions):
+        raise OptionError(f"options must be a StanceOptions, got {type(options).__name__}")
+    return options.replace(**overrides)
+
+
+def _kept_frames(observed: list, name: str, opts: StanceOptions) -> np.ndarray:
+    """Stack indices from the first to the last frame with a part; the skipped ends and
+    the left-out small contacts said."""
+    loaded = np.flatnonzero([len(o.contours) for o in observed])
+    if not len(loaded):
+        raise InputFileError(f"{name}: no frame has a contact of {opts.min_sensors} "
+                             f"sensors or more above the level")
+    first, last = int(loaded[0]), int(loaded[-1])
+    if first or last < len(observed) - 1:
+        log.info("%s: frames with nothing loaded skipped: %d at the start, %d at the end",
+                 name, first * opts.every, (len(observed) - 1 - last) * opts.every)
+    dropped = sum(o.dropped for o in observed[first:last + 1])
+    if dropped:
+        log.info("%s: %d contact(s) smaller than %d sensors skipped", name, dropped,
+                 opts.min_sensors)
+    return np.arange(first, last + 1)
+
+
+def _link(observed: list) -> tuple[list, list]:
+    """The parts' chains ``[(frame, label), ...]`` and the events, by overlap."""
+    chains, events = [], []
+    open_chain = {}  # label in the previous frame -> chain index
+    for f, parts in enumerate(observed):
+        n_now = len(parts.contours)
+        if f == 0:
+            open_chain = {q: _start(chains, 0, q, "first frame") for q in range(1, n_now + 1)}
+            continue
+        prev = observed[f - 1]
+        both = (prev.labels > 0) & (parts.labels > 0)
+        links = set(zip(prev.labels[both].tolist(), parts.labels[both].tolist()))
+        now = {}
+        for group_prev, group_now in _groups(links, len(prev.contours), n_now):
+            old = [open_chain[p] for p in sorted(group_prev)]
+            if len(group_prev) == 1 and len(group_now) == 1:
+                q = next(iter(group_now))
+                chains[old[0]][0].append((f, q))
+                now[q] = old[0]
+                continue
+            new = sorted(group_now)
+            how = ("appears" if not old else f"merge of parts {_names(old)}"
+                   if len(old) > 1 else f"split of part {old[0]}")
+            for q in new:
+                now[q] = _start(chains, f, q, how)
+            ends = (f"merges into part {now[new[0]]}" if len(new) == 1 else
+                    f"splits into parts {_names([now[q] for q in new])}" if new else
+                    "leaves")
+            for c in old:
+                chains[c][2] = ends
+            events.append(_event(f, old, [now[q] for q in new]))
+        open_chain = now
+    for c in open_chain.values():
+        chains[c][2] = "last frame"
+    return chains, events
+
+
+def _start(chains: list, f: int, q: int, how: str) -> int:
+    chains.append([[(f, q)], how, ""])
+    return len(chains) - 1
+
+
+def _names(parts) -> str:
+    return ", ".join(str(p) for p in parts)
+
+
+def _event(f: int, old: list, new: list) -> str:
+    if not old:
+        return f"frame {f}: part {new[0]} appears"
+    if not new:
+        return f"frame {f}: part {old[0]} leaves"
+    if len(new) == 1:
+        return f"frame {f}: parts {_names(old)} merge into part {new[0]} (transitional)"
+    if len(old) == 1:
+        return f"frame {f}: part {old[0]} splits into parts {_names(new)} (transitional)"
+    return f"frame {f}: parts {_names(old)} become parts {_names(new)} (transitional)"
+
+
+def _groups(links: set, n_prev: int, n_now: int) -> list:
+    """Connected groups (previous labels, current labels) of the overlap graph, every
+    label in one group (a part without overlap alone)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = n_prev + n_now
+    i = np.array([p - 1 for p, _ in links], dtype=np.intp)
+    j = np.array([n_prev + q - 1 for _, q in links], dtype=np.intp)
+    graph = coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
+    _, comp = connected_components(graph, directed=False)
+    groups = {}
+    for k, c in enumerate(comp):
+        side = 0 if k < n_prev else 1
+        groups.setdefault(c, (set(), set()))[side].add(k + 1 if side == 0 else k - n_prev + 1)
+    return list(groups.values())
+
+
+def _follow(c: int, chain: list, observed: list, opts: StanceOptions,
+            morph_options) -> PartTrack:
+    """Track one part's chain of boundaries with its own nodes."""
+    steps, start, end = chain
+    frames = np.array([f for f, _ in steps])
+    labels = np.array([q for _, q in steps])
+    contours = [observed[f].contours[q - 1] for f, q in steps]
+    spacing = opts.spacing * opts.pixel_size
+    longest = max(_perimeter(b) for b in contours)
+    m = max(MIN_PART_NODES, math.ceil(longest / spacing))
+    shapes = [Shape(resample(b, m)) for b in contours]
+    points, energy = _track_part(shapes, [f"part {c} in frame {f}" for f in frames],
+                                 morph_options)
+    crossed = np.array([self_crossings(p) > 0 for p in points])
+    node_d, gap = zip(*(_fit(p, b) for p, b in zip(points, contours, strict=True)),
+                      strict=True)
+    return PartTrack(
+        part=c, frames=frames, labels=labels, points=points, energy=energy,
+        sensors=np.array([observed[f].sensors[q - 1] for f, q in steps]),
+        area=np.array([abs(area(b)) for b in contours]), node_distance=np.array(node_d),
+        boundary_gap=np.array(gap), crossed=crossed, start=start, end=end)
+
+
+def _track_part(shapes: list, names: list, morph_options) -> tuple:
+    """(points (F_p, m, 2), energy (F_p,)): each frame reached by morphing the tracked
+    previous frame onto it, node ``i`` pulled to the observed node of the cyclic shift
+    nearest in the least-squares sense (order kept, every node matched, so the nodes stay
+    evenly spread over the boundary as it grows, and no contour folds)."""
+    points, energy = [shapes[0].points], [0.0]
+    for f in range(1, len(shapes)):
+        source, target = shapes[0].with_points(points[-1]), shapes[f]
+        try:
+            result = morph(source, target, matching=_cyclic_pairs(source.points,
+                                                                  target.points),
+                           options=morph_options)
+        except (ValueError, MorphDivergedError) as exc:
+            raise ValueError(f"{names[f]}: {exc}") from exc
+        points.append(result.shapes[-1])
+        energy.append(float(result.energy[-1]))
+    return np.array(points), np.array(energy)
+
+
+def _cyclic_pairs(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Pairs (i, (i + s) mod m) for the shift ``s`` minimising the summed squared
+    distances of two contours of ``m`` nodes running the same way round."""
+    m = len(a)
+    shifted = b[(np.arange(m)[:, None] + np.arange(m)[None, :]) % m]  # [s, i]
+    s = int(np.argmin(((shifted - a[None]) ** 2).sum(axis=(1, 2))))
+    return np.c_[np.arange(m), (np.arange(m) + s) % m]
+
+
+def _perimeter(points: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(points, axis=0, append=points[:1]), axis=1).sum())
+
+
+def _fit(nodes: np.ndarray, boundary: np.ndarray) -> tuple[float, float]:
+    """(largest node-to-boundary distance, largest boundary-point-to-node distance)."""
+    to_boundary, _ = curve_distances(nodes, boundary)
+    return float(to_boundary.max()), float(cKDTree(nodes).query(boundary)[0].max())
