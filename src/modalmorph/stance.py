@@ -11,8 +11,9 @@ after start as new *transitional objects* (the paper's term), and the events say
 Each part is followed from when it appears to when it leaves with its own nodes (as
 many as its largest boundary needs at ``spacing``), as :func:`modalmorph.track` does:
 the tracked shape of each frame is morphed (:func:`modalmorph.morph`) onto the next
-frame's boundary, here with an order-preserving cyclic correspondence, so the strain energy (22) of every frame's deformation is known per part
-and in all. Frames with nothing loaded at the start and the end are skipped, and said.
+frame's boundary, here with an order-preserving cyclic correspondence, so the strain
+energy (22) of every frame's deformation is known per part and in all. Frames with
+nothing loaded at the start and the end are skipped, and said.
 """
 
 from __future__ import annotations
@@ -227,7 +228,8 @@ def _link(observed: list) -> tuple[list, list]:
             continue
         prev = observed[f - 1]
         both = (prev.labels > 0) & (parts.labels > 0)
-        links = set(zip(prev.labels[both].tolist(), parts.labels[both].tolist()))
+        links = set(zip(prev.labels[both].tolist(), parts.labels[both].tolist(),
+                        strict=True))
         now = {}
         for group_prev, group_now in _groups(links, len(prev.contours), n_now):
             old = [open_chain[p] for p in sorted(group_prev)]
