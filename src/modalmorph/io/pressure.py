@@ -158,10 +158,11 @@ def read_pressure(path) -> np.ndarray:
         raise InputFileError(f"{name}: pressure files are NPY or NPZ arrays, got "
                              f"{path.suffix or 'no extension'!r}")
     try:
-        with np.load(path, allow_pickle=False) as data:
-            array = data["pressure" if "pressure" in data else data.files[0]]
-    except AttributeError:  # an NPY file: np.load returns the array (no context manager)
-        array = np.load(path, allow_pickle=False)
+        if path.suffix.lower() == ".npy":
+            array = np.load(path, allow_pickle=False)
+        else:
+            with np.load(path, allow_pickle=False) as data:
+                array = data["pressure" if "pressure" in data else data.files[0]]
     except (OSError, ValueError, IndexError) as exc:
         raise InputFileError(f"{name}: cannot read the array: {exc}") from None
     return check_pressure(array, name)
