@@ -33,7 +33,8 @@ from .io.pressure import check_pressure, frame_parts, pressure_level
 from .options import MorphOptions, StanceOptions
 from .pipeline import morph
 
-__all__ = ["MIN_PART_NODES", "PartTrack", "Stance", "StanceOptions", "stance"]
+__all__ = ["MIN_PART_NODES", "PartTrack", "Registration", "Stance", "StanceOptions",
+           "footprint_parts", "register_footprints", "stance"]
 
 log = logging.getLogger(__name__)
 
@@ -353,3 +354,127 @@ def _fit(nodes: np.ndarray, boundary: np.ndarray) -> tuple[float, float]:
     """(largest node-to-boundary distance, largest boundary-point-to-node distance)."""
     to_boundary, _ = curve_distances(nodes, boundary)
     return float(to_boundary.max()), float(cKDTree(nodes).query(boundary)[0].max())
+
+
+@dataclass(frozen=True, eq=False)
+class Registration:
+    """A peak-pressure image registered to a template footprint, part by part.
+
+    Attributes
+    ----------
+    template : tuple of ndarray (m_k, 2)
+        The template's parts (mm), the same for every image registered to it.
+    shapes : tuple of ndarray (m_k, 2) or None
+        Each template part's nodes moved onto this image's part (None: no partner).
+    node_energy : tuple of ndarray (m_k,)
+        Strain energy (25) at each template node (NaN where no partner).
+    part_energy : ndarray, shape (K,)
+        Strain energy (22) of each template part's registration (NaN: no partner).
+    energy : float
+        Their sum over the registered parts.
+    area : float
+        Area of the image's registered parts, mm^2.
+    peak : ndarray, shape (2,)
+        Where on the template (mm) the node energy is largest.
+    peak_part, peak_node : int
+        The template part and node holding it.
+    missing : tuple of int
+        Template parts with no partner in the image (said in the log).
+    """
+
+    template: tuple
+    shapes: tuple
+    node_energy: tuple
+    part_energy: np.ndarray
+    energy: float
+    area: float
+    peak: np.ndarray
+    peak_part: int
+    peak_node: int
+    missing: tuple
+
+
+def footprint_parts(image, level: float, opts: StanceOptions) -> tuple:
+    """The loaded parts (FrameParts) of a peak image, as :func:`stance` sees a frame."""
+    return frame_parts(check_pressure(image, "image")[0], level,
+                       pixel_size=opts.pixel_size, smooth=opts.smooth,
+                       min_sensors=opts.min_sensors)
+
+
+def register_footprints(images, *, template: int | str | None = None, options: StanceOptions | None = None,
+                        morph_options: MorphOptions | None = None,
+                        **overrides) -> list[Registration]:
+    """Register peak-pressure images to a template footprint, part by part.
+
+    The template is by default the most typical image (the one whose loaded sensors
+    overlap the others' most, by mean Jaccard index: its parts are a real foot's, where
+    the mean image joins heel and forefoot through the averaged midfoot), ``"mean"`` (a
+    subject's mean footprint: the images share the plate's frame), one of them
+    (``template=i``) or an (H, W) image. Its parts
+    (heel, forefoot, toes: the loaded parts of :func:`stance`, at the level of the
+    images' peak) are each paired with the image part it overlaps most when that part
+    overlaps it most too, and morphed onto it (:func:`modalmorph.morph`, modal
+    matching in the plate's frame); the strain energy says how much each part of the
+    foot had to deform.
+
+    Returns
+    -------
+    list of Registration, one per image.
+    """
+    opts = _options(options, overrides)
+    stack = check_pressure(images, "images")
+    level = pressure_level(stack, threshold=opts.threshold, fraction=opts.fraction,
+                           name="images")
+    if template is None:
+        template = _typical(stack, level)
+        log.info("template: image %d, the most typical footprint", template)
+    base = stack.mean(axis=0) if isinstance(template, str) and template == "mean" else \
+        stack[template] if isinstance(template, int | np.integer) else \
+        check_pressure(template, "template")[0]
+    ref = footprint_parts(base, level, opts)
+    spacing = opts.spacing * opts.pixel_size
+    shapes = [Shape(resample(b, max(MIN_PART_NODES, math.ceil(_perimeter(b) / spacing))))
+              for b in ref.contours]
+    return [_register(ref, shapes, footprint_parts(image, level, opts), spacing,
+                      morph_options, f"image {i}") for i, image in enumerate(stack)]
+
+
+def _typical(stack: np.ndarray, level: float) -> int:
+    """The image whose loaded sensors overlap the others' most (mean Jaccard index)."""
+    masks = (stack > level).reshape(len(stack), -1).astype(np.float64)
+    both = masks @ masks.T
+    either = masks.sum(axis=1)[:, None] + masks.sum(axis=1)[None, :] - both
+    return int(np.argmax((both / np.maximum(either, 1)).mean(axis=1)))
+
+
+def _register(ref, shapes: list, parts, spacing: float, morph_options, name: str):
+    """One image's Registration (see :func:`register_footprints`)."""
+    overlap = np.zeros((len(ref.contours) + 1, len(parts.contours) + 1), dtype=np.intp)
+    np.add.at(overlap, (ref.labels.ravel(), parts.labels.ravel()), 1)
+    overlap = overlap[1:, 1:]
+    moved, node_e, part_e, area_sum = [], [], np.full(len(shapes), np.nan), 0.0
+    for k, shape in enumerate(shapes):
+        q = int(np.argmax(overlap[k])) if overlap.shape[1] else -1
+        if q < 0 or not overlap[k, q] or int(np.argmax(overlap[:, q])) != k:
+            moved.append(None)
+            node_e.append(np.full(shape.m, np.nan))
+            continue
+        b = parts.contours[q]
+        target = Shape(resample(b, max(MIN_PART_NODES, math.ceil(_perimeter(b) / spacing))))
+        result = morph(shape, target, options=morph_options, rotation="none")
+        moved.append(result.shapes[-1])
+        node_e.append(result.node_energy[-1])
+        part_e[k] = result.energy[-1]
+        area_sum += abs(area(b))
+    missing = tuple(k for k, s in enumerate(moved) if s is None)
+    if missing:
+        log.info("%s: template part(s) %s have no partner", name, _names(missing))
+    flat = np.concatenate(node_e)
+    best = int(np.nanargmax(flat)) if np.isfinite(flat).any() else 0
+    owner = int(np.searchsorted(np.cumsum([s.m for s in shapes]), best, side="right"))
+    return Registration(
+        template=tuple(s.points for s in shapes), shapes=tuple(moved),
+        node_energy=tuple(node_e), part_energy=part_e, energy=float(np.nansum(part_e)),
+        area=area_sum, peak=np.concatenate([s.points for s in shapes])[best],
+        peak_part=owner, peak_node=best - sum(s.m for s in shapes[:owner]),
+        missing=missing)

@@ -13,7 +13,8 @@ import numpy as np
 
 from ._draw import import_matplotlib
 
-__all__ = ["MAX_PANELS", "plot_stance_frames", "plot_part_energy", "save_stance_figures"]
+__all__ = ["MAX_PANELS", "plot_footprints", "plot_part_energy", "plot_stance_frames",
+           "save_stance_figures"]
 
 MAX_PANELS = 8  # frames drawn side by side at most (8 footprints of 33 x 63 sensors fit A4)
 _CYCLE = "tab10"
@@ -105,3 +106,50 @@ def save_stance_figures(stance, out_dir, *, dpi: int = 150) -> list[Path]:
     plot_part_energy(stance, ax=energy.add_subplot())
     energy.savefig(out / "stance_energy.png", dpi=dpi)
     return [out / "stance.png", out / "stance_energy.png"]
+
+
+def plot_footprints(registrations, *, titles=None, ncols: int = 10, fig=None):
+    """A grid of registered footprints (:func:`modalmorph.stance.register_footprints`):
+    each template part moved onto the image's part, coloured by the strain energy of
+    its nodes (25) on one scale for all, the template's parts left unpaired in grey.
+
+    Returns
+    -------
+    matplotlib Figure
+    """
+    import_matplotlib()
+    from matplotlib.collections import LineCollection
+    from matplotlib.colors import Normalize
+    from matplotlib.figure import Figure
+
+    n = len(registrations)
+    rows = -(-n // ncols)
+    fig = fig or Figure(figsize=(0.9 * min(n, ncols) + 1, 2.2 * rows), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(rows, min(n, ncols), sharex=True, sharey=True)).ravel()
+    top = max(float(np.nanmax(np.concatenate(r.node_energy))) for r in registrations
+              if np.isfinite(np.concatenate(r.node_energy)).any())
+    norm = Normalize(0.0, top)
+    for i, (ax, reg) in enumerate(zip(axes, registrations, strict=False)):
+        for k, shape in enumerate(reg.shapes):
+            if shape is None:
+                t = reg.template[k]
+                ax.plot(*np.vstack([t, t[:1]]).T, color="0.7", lw=0.6)
+                continue
+            closed = np.vstack([shape, shape[:1]])
+            e = reg.node_energy[k]
+            segs = np.stack([closed[:-1], closed[1:]], axis=1)
+            ax.add_collection(LineCollection(segs, array=0.5 * (e + np.roll(e, -1)),
+                                             cmap="viridis", norm=norm, lw=1.5))
+        if reg.shapes[reg.peak_part] is not None:
+            ax.plot(*reg.shapes[reg.peak_part][reg.peak_node], "r+", ms=5)
+        ax.set_title(titles[i] if titles else f"{i}", fontsize=6)
+        ax.set_aspect("equal")
+        ax.axis("off")
+    for ax in axes[n:]:
+        ax.axis("off")
+    axes[0].invert_yaxis()  # rows of the plate down, as the pressure images
+    axes[0].autoscale()
+    mappable = axes[0].collections[0] if axes[0].collections else None
+    if mappable is not None:
+        fig.colorbar(mappable, ax=list(axes), shrink=0.6, label="node strain energy (25)")
+    return fig
