@@ -112,7 +112,7 @@ class Stance:
     part_energy : ndarray, shape (F, P)
         The same per part (NaN where the part is not loaded).
     events : tuple of str
-        What happened, in order ("frame 3: part 2 appears", ...).
+        What happened, in order ("frame 3: part 2 appears", ...: the input's frames).
     params : dict
         The options used.
     """
@@ -175,7 +175,7 @@ def stance(pressure, *, options: StanceOptions | None = None, name: str = "press
                             min_sensors=opts.min_sensors) for f in stack]
     kept = _kept_frames(observed, name, opts)
     observed = observed[kept[0]:kept[-1] + 1]
-    chains, events = _link(observed)
+    chains, events = _link(observed, kept * opts.every)
     parts = []
     for c, chain in enumerate(chains):
         parts.append(_follow(c, chain, observed, opts, morph_options))
@@ -218,8 +218,9 @@ def _kept_frames(observed: list, name: str, opts: StanceOptions) -> np.ndarray:
     return np.arange(first, last + 1)
 
 
-def _link(observed: list) -> tuple[list, list]:
-    """The parts' chains ``[(frame, label), ...]`` and the events, by overlap."""
+def _link(observed: list, numbers: np.ndarray) -> tuple[list, list]:
+    """The parts' chains ``[(frame, label), ...]`` and the events (naming the input's
+    frame ``numbers[f]``), by overlap."""
     chains, events = [], []
     open_chain = {}  # label in the previous frame -> chain index
     for f, parts in enumerate(observed):
@@ -249,7 +250,7 @@ def _link(observed: list) -> tuple[list, list]:
                     "leaves")
             for c in old:
                 chains[c][2] = ends
-            events.append(_event(f, old, [now[q] for q in new]))
+            events.append(_event(int(numbers[f]), old, [now[q] for q in new]))
         open_chain = now
     for c in open_chain.values():
         chains[c][2] = "last frame"
@@ -364,6 +365,8 @@ class Registration:
     ----------
     template : tuple of ndarray (m_k, 2)
         The template's parts (mm), the same for every image registered to it.
+    template_sensors : ndarray of int, shape (K,)
+        Their loaded sensors.
     shapes : tuple of ndarray (m_k, 2) or None
         Each template part's nodes moved onto this image's part (None: no partner).
     node_energy : tuple of ndarray (m_k,)
@@ -383,6 +386,7 @@ class Registration:
     """
 
     template: tuple
+    template_sensors: np.ndarray
     shapes: tuple
     node_energy: tuple
     part_energy: np.ndarray
@@ -394,14 +398,16 @@ class Registration:
     missing: tuple
 
 
-def footprint_parts(image, level: float, opts: StanceOptions) -> tuple:
-    """The loaded parts (FrameParts) of a peak image, as :func:`stance` sees a frame."""
+def footprint_parts(image, level: float, opts: StanceOptions, regions=None):
+    """The loaded parts (FrameParts) of a peak image, as :func:`stance` sees a frame,
+    cut by ``regions`` (H, W) when given."""
     return frame_parts(check_pressure(image, "image")[0], level,
                        pixel_size=opts.pixel_size, smooth=opts.smooth,
-                       min_sensors=opts.min_sensors)
+                       min_sensors=opts.min_sensors, regions=regions)
 
 
-def register_footprints(images, *, template: int | str | None = None, options: StanceOptions | None = None,
+def register_footprints(images, *, template: int | str | None = None,
+                        options: StanceOptions | None = None,
                         morph_options: MorphOptions | None = None,
                         **overrides) -> list[Registration]:
     """Register peak-pressure images to a template footprint, part by part.
@@ -412,8 +418,10 @@ def register_footprints(images, *, template: int | str | None = None, options: S
     subject's mean footprint: the images share the plate's frame), one of them
     (``template=i``) or an (H, W) image. Its parts
     (heel, forefoot, toes: the loaded parts of :func:`stance`, at the level of the
-    images' peak) are each paired with the image part it overlaps most when that part
-    overlaps it most too, and morphed onto it (:func:`modalmorph.morph`, modal
+    images' peak) divide the plate into regions, every sensor to the template part
+    nearest it (anatomical masks); each template part is morphed onto the largest loaded
+    part of the image in its region (a heel joined to the forefoot through the midfoot
+    is cut where the regions meet) (:func:`modalmorph.morph`, modal
     matching in the plate's frame); the strain energy says how much each part of the
     foot had to deform.
 
@@ -435,8 +443,13 @@ def register_footprints(images, *, template: int | str | None = None, options: S
     spacing = opts.spacing * opts.pixel_size
     shapes = [Shape(resample(b, max(MIN_PART_NODES, math.ceil(_perimeter(b) / spacing))))
               for b in ref.contours]
-    return [_register(ref, shapes, footprint_parts(image, level, opts), spacing,
-                      morph_options, f"image {i}") for i, image in enumerate(stack)]
+    from scipy import ndimage
+
+    # every sensor of the plate in the region of the template part nearest it
+    _, (ri, ci) = ndimage.distance_transform_edt(ref.labels == 0, return_indices=True)
+    regions = ref.labels[ri, ci]
+    return [_register(ref, shapes, footprint_parts(image, level, opts, regions), regions,
+                      spacing, morph_options, f"image {i}") for i, image in enumerate(stack)]
 
 
 def _typical(stack: np.ndarray, level: float) -> int:
@@ -447,19 +460,20 @@ def _typical(stack: np.ndarray, level: float) -> int:
     return int(np.argmax((both / np.maximum(either, 1)).mean(axis=1)))
 
 
-def _register(ref, shapes: list, parts, spacing: float, morph_options, name: str):
+def _register(ref, shapes: list, parts, regions: np.ndarray, spacing: float,
+              morph_options, name: str):
     """One image's Registration (see :func:`register_footprints`)."""
-    overlap = np.zeros((len(ref.contours) + 1, len(parts.contours) + 1), dtype=np.intp)
-    np.add.at(overlap, (ref.labels.ravel(), parts.labels.ravel()), 1)
-    overlap = overlap[1:, 1:]
+    first = [int(np.flatnonzero(parts.labels.ravel() == q)[0])
+             for q in range(1, len(parts.contours) + 1)]
+    region = regions.ravel()[first] if first else np.zeros(0, dtype=np.intp)
     moved, node_e, part_e, area_sum = [], [], np.full(len(shapes), np.nan), 0.0
     for k, shape in enumerate(shapes):
-        q = int(np.argmax(overlap[k])) if overlap.shape[1] else -1
-        if q < 0 or not overlap[k, q] or int(np.argmax(overlap[:, q])) != k:
+        mine = np.flatnonzero(region == k + 1)
+        if not len(mine):
             moved.append(None)
             node_e.append(np.full(shape.m, np.nan))
             continue
-        b = parts.contours[q]
+        b = parts.contours[int(mine[np.argmax(parts.sensors[mine])])]  # its largest part
         target = Shape(resample(b, max(MIN_PART_NODES, math.ceil(_perimeter(b) / spacing))))
         result = morph(shape, target, options=morph_options, rotation="none")
         moved.append(result.shapes[-1])
@@ -473,7 +487,8 @@ def _register(ref, shapes: list, parts, spacing: float, morph_options, name: str
     best = int(np.nanargmax(flat)) if np.isfinite(flat).any() else 0
     owner = int(np.searchsorted(np.cumsum([s.m for s in shapes]), best, side="right"))
     return Registration(
-        template=tuple(s.points for s in shapes), shapes=tuple(moved),
+        template=tuple(s.points for s in shapes), template_sensors=ref.sensors,
+        shapes=tuple(moved),
         node_energy=tuple(node_e), part_energy=part_e, energy=float(np.nansum(part_e)),
         area=area_sum, peak=np.concatenate([s.points for s in shapes])[best],
         peak_part=owner, peak_node=best - sum(s.m for s in shapes[:owner]),

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._draw import import_matplotlib
+from ._draw import ENERGY_RANGE, import_matplotlib
 
 __all__ = ["MAX_PANELS", "plot_footprints", "plot_part_energy", "plot_stance_frames",
            "save_stance_figures"]
@@ -111,7 +111,9 @@ def save_stance_figures(stance, out_dir, *, dpi: int = 150) -> list[Path]:
 def plot_footprints(registrations, *, titles=None, ncols: int = 10, fig=None):
     """A grid of registered footprints (:func:`modalmorph.stance.register_footprints`):
     each template part moved onto the image's part, coloured by the strain energy of
-    its nodes (25) on one scale for all, the template's parts left unpaired in grey.
+    its nodes (25) on one scale for all (up to the 98th percentile: a few folded
+    registrations would grey out the rest), the node where it peaks marked (red +), the
+    template's parts left unpaired in grey.
 
     Returns
     -------
@@ -126,9 +128,10 @@ def plot_footprints(registrations, *, titles=None, ncols: int = 10, fig=None):
     rows = -(-n // ncols)
     fig = fig or Figure(figsize=(0.9 * min(n, ncols) + 1, 2.2 * rows), layout="constrained")
     axes = np.atleast_1d(fig.subplots(rows, min(n, ncols), sharex=True, sharey=True)).ravel()
-    top = max(float(np.nanmax(np.concatenate(r.node_energy))) for r in registrations
-              if np.isfinite(np.concatenate(r.node_energy)).any())
-    norm = Normalize(0.0, top)
+    values = np.concatenate([e for r in registrations for e in r.node_energy])
+    finite = values[np.isfinite(values)]
+    norm = Normalize(0.0, float(np.percentile(finite, ENERGY_RANGE[1])) if len(finite)
+                     else 1.0)
     for i, (ax, reg) in enumerate(zip(axes, registrations, strict=False)):
         for k, shape in enumerate(reg.shapes):
             if shape is None:
@@ -151,5 +154,6 @@ def plot_footprints(registrations, *, titles=None, ncols: int = 10, fig=None):
     axes[0].autoscale()
     mappable = axes[0].collections[0] if axes[0].collections else None
     if mappable is not None:
-        fig.colorbar(mappable, ax=list(axes), shrink=0.6, label="node strain energy (25)")
+        fig.colorbar(mappable, ax=list(axes), shrink=0.6, extend="max",
+                     label="node strain energy (25)")
     return fig

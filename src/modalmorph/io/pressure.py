@@ -28,8 +28,7 @@ import numpy as np
 from ..core.quality import area
 from ..errors import InputFileError, OptionError
 
-__all__ = ["FOOTPRINT_CLOSING", "JIKU_RATE", "SMOOTH_SENSORS", "FrameParts",
-           "check_pressure", "footprint", "frame_parts",
+__all__ = ["JIKU_RATE", "SMOOTH_SENSORS", "FrameParts", "check_pressure", "frame_parts",
            "jiku_conditions", "jiku_peaks", "jiku_trial", "pressure_level", "read_pressure"]
 
 # Gaussian width (sensors) of the smoothing before the iso-line: a light one that rounds
@@ -37,11 +36,6 @@ __all__ = ["FOOTPRINT_CLOSING", "JIKU_RATE", "SMOOTH_SENSORS", "FrameParts",
 # jiku-data (10 subjects, 25 Hz) the tracked nodes on the smoothed field's iso-line lie
 # within 0.80 sensor of the raw field's (benchmarks/pedobarography.py, column raw).
 SMOOTH_SENSORS = 0.5
-# Radius (sensors) of the disc closing a peak-pressure image into one footprint: the gap
-# under the arch of jiku-data's high-arched subjects (subject 0: heel and forefoot apart
-# in 40 of 60 peak images at 2 % of the peak) is bridged at 3 sensors in every one of the
-# 600 images (benchmarks/footprints.py counts the parts).
-FOOTPRINT_CLOSING = 3
 JIKU_RATE = 500.0  # Hz, the plate of Pataky et al. (2008) (jiku-data's README)
 _JIKU = "SpeedPP2DS"  # jiku-data's time series; SpeedPP2D holds the peak images
 
@@ -109,7 +103,8 @@ def pressure_level(pressure: np.ndarray, *, threshold: float | None, fraction: f
 
 
 def frame_parts(frame: np.ndarray, level: float, *, pixel_size: float = 1.0,
-                smooth: float = SMOOTH_SENSORS, min_sensors: int = 2) -> FrameParts:
+                smooth: float = SMOOTH_SENSORS, min_sensors: int = 2,
+                regions: np.ndarray | None = None) -> FrameParts:
     """The loaded parts of one (H, W) frame and their sub-sensor boundaries.
 
     Parameters
@@ -124,6 +119,8 @@ def frame_parts(frame: np.ndarray, level: float, *, pixel_size: float = 1.0,
         Gaussian width of the smoothing, sensors (0: none).
     min_sensors : int, optional
         Smaller contacts (a single loaded sensor) are left out and counted in ``dropped``.
+    regions : ndarray of int, shape (H, W), optional
+        Regions (anatomical masks) that cut the parts: a part lies in one region.
 
     Returns
     -------
@@ -136,6 +133,12 @@ def frame_parts(frame: np.ndarray, level: float, *, pixel_size: float = 1.0,
     loaded = field > level
     below = min(0.0, level - 1.0)
     labels, count = ndimage.label(loaded)  # 4-connected: marching squares' sides
+    if regions is not None:
+        labels, count = np.zeros_like(labels), 0
+        for r in np.unique(regions):
+            lab, n = ndimage.label(loaded & (regions == r))
+            labels[lab > 0] = lab[lab > 0] + count
+            count += n
     sizes = np.bincount(labels.ravel(), minlength=count + 1)[1:]
     keep = np.flatnonzero(sizes >= min_sensors) + 1
     relabel = np.zeros(count + 1, dtype=np.intp)
@@ -153,27 +156,6 @@ def frame_parts(frame: np.ndarray, level: float, *, pixel_size: float = 1.0,
         contours.append(pts if area(pts) > 0 else pts[::-1])
     return FrameParts(labels=labels, contours=tuple(contours), sensors=sizes[keep - 1],
                       dropped=int(count - len(keep)))
-
-
-def footprint(image: np.ndarray, level: float, *, pixel_size: float = 1.0,
-              smooth: float = SMOOTH_SENSORS,
-              closing: float = FOOTPRINT_CLOSING) -> np.ndarray:
-    """The outline (n, 2) of a peak-pressure image's footprint: the largest loaded part
-    of the field closed by a disc of radius ``closing`` sensors (grey closing: the arch
-    and the gaps between toes are bridged, the convex stretches of the boundary stay the
-    field's own iso-line)."""
-    from scipy import ndimage
-
-    r = np.arange(-int(closing), int(closing) + 1)
-    disc = np.hypot(*np.meshgrid(r, r)) <= closing
-    field = ndimage.gaussian_filter(np.asarray(image, dtype=np.float64), smooth,
-                                    mode="constant") if smooth > 0 else image
-    closed = ndimage.grey_closing(np.pad(field, int(closing)), footprint=disc)
-    closed = closed[int(closing):-int(closing), int(closing):-int(closing)]
-    parts = frame_parts(closed, level, pixel_size=pixel_size, smooth=0)
-    if not parts.contours:
-        raise InputFileError(f"no footprint: no sensor above {level:g}")
-    return parts.contours[int(np.argmax(parts.sensors))]
 
 
 def read_pressure(path) -> np.ndarray:
