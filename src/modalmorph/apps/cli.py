@@ -190,7 +190,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "exactly as the single commands write it, and write "
                           "OUT/summary.csv. Items already complete in OUT are skipped; a "
                           "failing item is recorded and the batch goes on."))
-    stance_app.add_parser(command, add_option_flags, _add_config)
+    stance_app.add_parser(command, add_option_flags, _add_config, load_config)
     _app_parser(command("app", _run_app, "the interactive web application",
                         "Serve the method as a local web page: pick two shapes, set the "
                         "options, run, and explore the result."))

@@ -34,8 +34,9 @@ log = logging.getLogger(__name__)
 _JIKU = "jiku:"
 
 
-def add_parser(command, add_option_flags, add_config) -> None:
-    """Register ``stance`` with the command line's ``command(name, run, help, text)``."""
+def add_parser(command, add_option_flags, add_config, load_config) -> None:
+    """Register ``stance`` with the command line's ``command(name, run, help, text)``,
+    its option flags, ``--config`` and the config's reader."""
     p = command("stance", run, "every loaded part of a pressure stack through the stance "
                 "phase", "Follow every loaded part of a foot on a pressure plate (heel, "
                 "forefoot, toes) from when it appears to when it leaves, through merges; "
@@ -48,6 +49,7 @@ def add_parser(command, add_option_flags, add_config) -> None:
                    help="output folder (replaced as a whole)")
     add_config(p)
     add_option_flags(p, (StanceOptions,))
+    p.set_defaults(load_config=load_config)
 
 
 def is_pressure_stack(paths) -> bool:
@@ -66,11 +68,9 @@ def is_pressure_stack(paths) -> bool:
 def run(args) -> int:
     """The ``stance`` command: options from ``--config`` and the flags, then
     :func:`stance_files`."""
-    from .cli import load_config
-
-    values = {} if args.config is None else load_config(args.config)
-    for name in (f.name for f in StanceOptions.__dataclass_fields__.values()):
-        if getattr(args, name, None) is not None:
+    values = {} if args.config is None else args.load_config(args.config)
+    for name in StanceOptions.__dataclass_fields__:
+        if getattr(args, name, None) is not None:  # the command line wins
             values[name] = getattr(args, name)
     opts = split(values, (StanceOptions,), where="options")[StanceOptions]
     return stance_files(args.input, args.out, opts, quiet=args.quiet)
