@@ -152,3 +152,25 @@ def test_real_stance_phase():
         assert part.node_distance.max() <= NODE_TOL
         assert np.all(part.boundary_gap[part.sensors >= LARGE] <= GAP_TOL)
         assert not part.crossed.any()
+
+
+def test_footprints_registered_part_by_part():
+    """Peak images: the template's own image costs no energy; a foot whose heel joins the
+    forefoot through the midfoot is still registered part by part (the regions cut it)."""
+    from modalmorph.stance import register_footprints
+
+    stack = synthetic_stance()
+    peaks = np.array([stack[5], stack[6], stack.max(axis=0)])  # parts apart, apart, joined
+    regs = register_footprints(peaks, template=0, threshold=5.0)
+    assert len(regs[0].template) == 2  # heel and forefoot
+    assert all(not r.missing for r in regs)
+    # the template onto itself: every node already on its partner, no deformation
+    assert regs[0].energy < 1e-8
+    for r in regs:
+        assert np.all(r.part_energy >= 0)  # U^T K U (22); node energies (25) are signed
+        assert r.energy >= regs[0].energy
+    assert regs[2].area > regs[0].area  # the whole stance's peak covers more
+    from modalmorph.figures.stance import plot_footprints
+
+    fig = plot_footprints(regs, titles=["5", "6", "peak"], ncols=3)
+    assert len(fig.axes) == 4  # three footprints and the colour bar
