@@ -1,5 +1,5 @@
 """The 600 peak-pressure images of Pataky et al. (2008) registered to each subject's mean
-footprint, part by part (modalmorph.stance.register_footprints; issue 24).
+footprint, part by part (modalmorph.register_footprints; issue 24).
 
 Data: the optional package jiku-data (GPL-3; `pip install jiku-data`): 10 subjects x 3
 walking speeds x 20 trials. Prints a row per subject and speed: trials, area of the
@@ -19,8 +19,8 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
+from modalmorph import register_footprints
 from modalmorph.io.pressure import jiku_conditions, jiku_peaks
-from modalmorph.stance import register_footprints
 
 try:
     import jikudata  # noqa: F401

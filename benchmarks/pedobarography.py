@@ -23,9 +23,9 @@ import time
 
 import numpy as np
 
+from modalmorph import stance
 from modalmorph.core.quality import curve_distances
 from modalmorph.io.pressure import frame_parts, jiku_conditions, jiku_trial
-from modalmorph.stance import stance
 
 try:
     import jikudata  # noqa: F401

@@ -45,7 +45,7 @@ LAYERS = (
     ("simulation", "matching", "io", "figures"),  # time integration, matching, files, plots
     ("pipeline", "datasets"),  # morph(): the method end to end; the bundled data
     ("tracking",),  # track(): sequences, frame by frame through morph()
-    ("stance",),  # stance(): every loaded part of a pressure stack
+    ("pedobarography",),  # stance(), register_footprints(): pressure plates
     ("",),  # the package's __init__: the public API
     ("apps",),  # command line, runs, batch, web app, report
     ("__main__",),

@@ -157,7 +157,7 @@ def test_real_stance_phase():
 def test_footprints_registered_part_by_part():
     """Peak images: the template's own image costs no energy; a foot whose heel joins the
     forefoot through the midfoot is still registered part by part (the regions cut it)."""
-    from modalmorph.stance import register_footprints
+    from modalmorph import register_footprints
 
     stack = synthetic_stance()
     peaks = np.array([stack[5], stack[6], stack.max(axis=0)])  # parts apart, apart, joined
@@ -174,3 +174,13 @@ def test_footprints_registered_part_by_part():
 
     fig = plot_footprints(regs, titles=["5", "6", "peak"], ncols=3)
     assert len(fig.axes) == 4  # three footprints and the colour bar
+
+
+def test_public_names_are_the_functions():
+    """The verbs' module is not named after a verb: importing it never hides one."""
+    import modalmorph as mm
+    import modalmorph.apps.stance  # noqa: F401
+    import modalmorph.pedobarography  # noqa: F401
+
+    assert callable(mm.stance) and callable(mm.register_footprints)
+    assert mm.stance.__module__ == "modalmorph.pedobarography"

@@ -22,12 +22,12 @@ _WHERE = {
     "Matching": "matching", "match": "matching", "MatchOptions": "options",
     "MorphOptions": "options", "TrackOptions": "options", "Morph": "pipeline",
     "morph": "pipeline", "Simulation": "simulation", "Track": "tracking", "track": "tracking",
-    "set_blas_threads": "threads", "Stance": "stance", "StanceOptions": "options",
-    "stance": "stance",
+    "set_blas_threads": "threads", "Stance": "pedobarography", "StanceOptions": "options",
+    "register_footprints": "pedobarography", "stance": "pedobarography",
 }
 # subpackages and modules reachable as attributes (mm.io.read_frames, mm.figures, ...)
 _MODULES = ("apps", "core", "datasets", "errors", "figures", "io", "matching", "options",
-            "pipeline", "simulation", "stance", "threads", "tracking")
+            "pedobarography", "pipeline", "simulation", "threads", "tracking")
 
 __all__ = ["__version__", *sorted(_WHERE)]
 

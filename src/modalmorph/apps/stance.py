@@ -22,13 +22,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..figures.stance import save_stance_figures
+from ..errors import OptionError
+from ..figures.stance import plot_footprints, save_stance_figures
 from ..io import atomic_output_dir
-from ..io.pressure import jiku_trial, read_pressure
+from ..io.pressure import jiku_conditions, jiku_peaks, jiku_trial, read_pressure
 from ..options import StanceOptions, split
-from ..stance import stance
+from ..pedobarography import register_footprints, stance
 
-__all__ = ["add_parser", "is_pressure_stack", "run", "stance_files", "track_stack"]
+__all__ = ["add_parser", "is_pressure_stack", "run", "run_footprints", "stance_files",
+           "track_stack"]
 
 log = logging.getLogger(__name__)
 _JIKU = "jiku:"
@@ -45,11 +47,22 @@ def add_parser(command, add_option_flags, add_config, load_config) -> None:
     p.add_argument("input", metavar="INPUT",
                    help="an NPY/NPZ pressure array (T, H, W) or (H, W), or jiku:SUBJECT:"
                         "TRIAL (needs the optional package jiku-data)")
-    p.add_argument("--out", type=Path, required=True,
-                   help="output folder (replaced as a whole)")
-    add_config(p)
-    add_option_flags(p, (StanceOptions,))
-    p.set_defaults(load_config=load_config)
+    q = command("footprints", run_footprints, "peak-pressure images registered to a "
+                "template footprint", "Register peak-pressure images part by part (heel, "
+                "forefoot, toes) to a template footprint; write a row per image (area, "
+                "strain energy, where it peaks) and a grid of the registered footprints "
+                "coloured by energy.")
+    q.add_argument("input", metavar="INPUT",
+                   help="an NPY/NPZ array of peak images (N, H, W), or jiku:SUBJECT (its 60 "
+                        "trials; needs the optional package jiku-data)")
+    q.add_argument("--template", default=None,
+                   help="the most typical image (default), mean, or an image number")
+    for parser in (p, q):
+        parser.add_argument("--out", type=Path, required=True,
+                            help="output folder (replaced as a whole)")
+        add_config(parser)
+        add_option_flags(parser, (StanceOptions,))
+        parser.set_defaults(load_config=load_config)
 
 
 def is_pressure_stack(paths) -> bool:
@@ -65,15 +78,73 @@ def is_pressure_stack(paths) -> bool:
         len(np.unique(array)) > 2
 
 
-def run(args) -> int:
-    """The ``stance`` command: options from ``--config`` and the flags, then
-    :func:`stance_files`."""
+def _options(args) -> StanceOptions:
+    """Options from ``--config`` and the flags (the command line wins)."""
     values = {} if args.config is None else args.load_config(args.config)
     for name in StanceOptions.__dataclass_fields__:
-        if getattr(args, name, None) is not None:  # the command line wins
+        if getattr(args, name, None) is not None:
             values[name] = getattr(args, name)
-    opts = split(values, (StanceOptions,), where="options")[StanceOptions]
-    return stance_files(args.input, args.out, opts, quiet=args.quiet)
+    return split(values, (StanceOptions,), where="options")[StanceOptions]
+
+
+def run(args) -> int:
+    """The ``stance`` command: :func:`stance_files`."""
+    return stance_files(args.input, args.out, _options(args), quiet=args.quiet)
+
+
+def run_footprints(args) -> int:
+    """The ``footprints`` command: read, register, write a table, a record, a figure."""
+    name, opts = str(args.input), _options(args)
+    template = args.template if args.template in (None, "mean") else _number(args.template)
+    columns = {}
+    if name.startswith(_JIKU):
+        subject = int(name[len(_JIKU):])
+        images = jiku_peaks(subject)
+        columns["condition"], columns["speed_m_s"] = jiku_conditions(subject)
+    else:
+        images = read_pressure(args.input)
+    if template is not None and template != "mean" and not 0 <= template < len(images):
+        raise OptionError(f"template must be mean or an image number 0..{len(images) - 1}, "
+                          f"got {args.template!r}")
+    regs = register_footprints(images, template=template, options=opts)
+    with atomic_output_dir(args.out) as tmp:
+        _write_footprints(regs, Path(tmp), columns, dict(input=name, template=template,
+                                                         options=opts.record()))
+    if not args.quiet:
+        energy = np.array([r.energy for r in regs])
+        print(f"{len(regs)} images registered; strain energy median {np.median(energy):.4g}"
+              f", {sum(bool(r.missing) for r in regs)} with a template part unpaired",
+              file=sys.stderr)
+    return 0
+
+
+def _number(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise OptionError(f"template must be mean or an image number, got {text!r}") from None
+
+
+def _write_footprints(regs, folder: Path, columns: dict, record: dict) -> None:
+    from matplotlib.figure import Figure
+
+    n_parts = len(regs[0].template)
+    (folder / "result.json").write_text(json.dumps(
+        {**record, "template_parts": [t.tolist() for t in regs[0].template]}, indent=1))
+    with open(folder / "footprints.csv", "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(["image", *columns, "area_mm2", "energy",
+                         *(f"energy_part_{k}" for k in range(n_parts)), "peak_part",
+                         "peak_x_mm", "peak_y_mm", "unpaired_parts"])
+        for i, r in enumerate(regs):
+            writer.writerow([i, *(v[i] for v in columns.values()), f"{r.area:.6g}",
+                             f"{r.energy:.6g}", *(f"{e:.6g}" for e in r.part_energy),
+                             r.peak_part, f"{r.peak[0]:.4g}", f"{r.peak[1]:.4g}",
+                             " ".join(map(str, r.missing))])
+    fig = Figure(figsize=(min(len(regs), 20) * 0.7 + 1.5, 2.2 * -(-len(regs) // 20)),
+                 layout="constrained")
+    plot_footprints(regs, fig=fig, ncols=20)
+    fig.savefig(folder / "footprints.png", dpi=120)
 
 
 def stance_files(source, out, options: StanceOptions, *, quiet: bool = False) -> int:

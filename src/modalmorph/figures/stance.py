@@ -109,7 +109,7 @@ def save_stance_figures(stance, out_dir, *, dpi: int = 150) -> list[Path]:
 
 
 def plot_footprints(registrations, *, titles=None, ncols: int = 10, fig=None):
-    """A grid of registered footprints (:func:`modalmorph.stance.register_footprints`):
+    """A grid of registered footprints (:func:`modalmorph.register_footprints`):
     each template part moved onto the image's part, coloured by the strain energy of
     its nodes (25) on one scale for all (up to the 98th percentile: a few folded
     registrations would grey out the rest), the node where it peaks marked (red +), the

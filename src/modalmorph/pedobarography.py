@@ -38,6 +38,14 @@ __all__ = ["MIN_PART_NODES", "PartTrack", "Registration", "Stance", "StanceOptio
 
 log = logging.getLogger(__name__)
 
+# The template of register_footprints shows a foot's parts apart (a heel joined to the
+# forefoot in the template would leave a separate heel unregistered; apart in the
+# template, a joined one is cut where the regions meet): the most parts of >= LARGE_PART
+# sensors (issue 24's large parts) shown by at least TEMPLATE_SHARE of the images. On
+# jiku-data's subject 2, heel and forefoot are joined in 41 of 60 peak images: the most
+# typical image joined them and left 18 heels unregistered.
+LARGE_PART = 12
+TEMPLATE_SHARE = 0.1
 # Fewest nodes of a part's contour: a 2-sensor contact has a boundary of about 4 sensors,
 # 8 nodes at the default spacing of 0.5 sensor.
 MIN_PART_NODES = 8
@@ -412,9 +420,11 @@ def register_footprints(images, *, template: int | str | None = None,
                         **overrides) -> list[Registration]:
     """Register peak-pressure images to a template footprint, part by part.
 
-    The template is by default the most typical image (the one whose loaded sensors
-    overlap the others' most, by mean Jaccard index: its parts are a real foot's, where
-    the mean image joins heel and forefoot through the averaged midfoot), ``"mean"`` (a
+    The template is by default the most typical image (of those showing the most large
+    parts that a tenth of the images show, :data:`TEMPLATE_SHARE`, the one whose loaded
+    sensors overlap the others' most, by mean Jaccard index: its parts are a real
+    foot's, where the mean image joins heel and forefoot through the averaged midfoot),
+    ``"mean"`` (a
     subject's mean footprint: the images share the plate's frame), one of them
     (``template=i``) or an (H, W) image. Its parts
     (heel, forefoot, toes: the loaded parts of :func:`stance`, at the level of the
@@ -434,7 +444,7 @@ def register_footprints(images, *, template: int | str | None = None,
     level = pressure_level(stack, threshold=opts.threshold, fraction=opts.fraction,
                            name="images")
     if template is None:
-        template = _typical(stack, level)
+        template = _typical(stack, level, opts)
         log.info("template: image %d, the most typical footprint", template)
     base = stack.mean(axis=0) if isinstance(template, str) and template == "mean" else \
         stack[template] if isinstance(template, int | np.integer) else \
@@ -452,12 +462,17 @@ def register_footprints(images, *, template: int | str | None = None,
                       spacing, morph_options, f"image {i}") for i, image in enumerate(stack)]
 
 
-def _typical(stack: np.ndarray, level: float) -> int:
-    """The image whose loaded sensors overlap the others' most (mean Jaccard index)."""
+def _typical(stack: np.ndarray, level: float, opts: StanceOptions) -> int:
+    """Among the images with the most large parts that :data:`TEMPLATE_SHARE` of them
+    show, the one whose loaded sensors overlap the others' most (mean Jaccard index)."""
+    counts = np.array([np.count_nonzero(footprint_parts(image, level, opts).sensors
+                                        >= LARGE_PART) for image in stack])
+    most = max(c for c in np.unique(counts) if np.mean(counts >= c) >= TEMPLATE_SHARE)
     masks = (stack > level).reshape(len(stack), -1).astype(np.float64)
     both = masks @ masks.T
     either = masks.sum(axis=1)[:, None] + masks.sum(axis=1)[None, :] - both
-    return int(np.argmax((both / np.maximum(either, 1)).mean(axis=1)))
+    score = (both / np.maximum(either, 1)).mean(axis=1)
+    return int(np.argmax(np.where(counts == most, score, -1.0)))
 
 
 def _register(ref, shapes: list, parts, regions: np.ndarray, spacing: float,
