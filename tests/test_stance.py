@@ -184,3 +184,16 @@ def test_public_names_are_the_functions():
 
     assert callable(mm.stance) and callable(mm.register_footprints)
     assert mm.stance.__module__ == "modalmorph.pedobarography"
+
+
+def test_footprints_command(tmp_path):
+    stack = synthetic_stance()
+    path = tmp_path / "peaks.npy"
+    np.save(path, np.array([stack[5], stack[6], stack.max(axis=0)]))
+    assert main(["footprints", str(path), "--threshold", "5", "--template", "0",
+                 "--out", str(tmp_path / "out"), "-q"]) == 0
+    rows = (tmp_path / "out" / "footprints.csv").read_text().splitlines()
+    assert len(rows) == 4 and rows[0].startswith("image,area_mm2,energy")
+    assert (tmp_path / "out" / "footprints.png").exists()
+    assert main(["footprints", str(path), "--template", "7", "--out",
+                 str(tmp_path / "bad"), "-q"]) == 2  # no image 7: one line, exit 2
