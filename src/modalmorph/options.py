@@ -360,8 +360,8 @@ class StanceOptions(_Options):
         0.02, "without threshold: the loaded level as a fraction of the stack's peak",
         group="pressure", kind="float")
     pixel_size: float = _opt(
-        1.0, "sensor pitch in mm: contours, areas and figures in mm (default 1: in "
-        "sensors)", group="pressure", kind="float")
+        1.0, "sensor pitch in mm: contours, areas and figures in mm (1: in sensors)",
+        group="pressure", kind="float")
     smooth: float = _opt(
         0.5, "Gaussian width (sensors) of the smoothing before the boundary is drawn "
         "through the sensors (0: none)", group="pressure", kind="float")

@@ -1,5 +1,5 @@
-"""The ``modalmorph`` command line: ``demo``, ``match``, ``morph``, ``track``, ``batch``
-and ``app``.
+"""The ``modalmorph`` command line: ``demo``, ``match``, ``morph``, ``track``, ``batch``,
+``stance`` and ``footprints`` (:mod:`modalmorph.apps.stance`) and ``app``.
 
 The option flags are generated from the fields of the option classes
 (:mod:`modalmorph.options`, :class:`modalmorph.options.AlignOptions`,
