@@ -45,7 +45,7 @@ LAYERS = (
     ("simulation", "matching", "io", "figures"),  # time integration, matching, files, plots
     ("pipeline", "datasets", "phantoms"),  # morph(); the bundled data; strain phantoms
     ("tracking",),  # track(): sequences, frame by frame through morph()
-    ("cardiac",),  # strain(): myocardial strain from tracked walls
+    ("cardiac", "pedobarography"),  # strain(), stance(), register_footprints()
     ("",),  # the package's __init__: the public API
     ("apps",),  # command line, runs, batch, web app, report
     ("__main__",),

@@ -23,11 +23,13 @@ _WHERE = {
     "MorphOptions": "options", "TrackOptions": "options", "Morph": "pipeline",
     "morph": "pipeline", "Simulation": "simulation", "Track": "tracking", "track": "tracking",
     "set_blas_threads": "threads", "Strain": "cardiac", "StrainOptions": "options",
-    "strain": "cardiac",
+    "strain": "cardiac", "Stance": "pedobarography", "StanceOptions": "options",
+    "register_footprints": "pedobarography", "stance": "pedobarography",
 }
 # subpackages and modules reachable as attributes (mm.io.read_frames, mm.figures, ...)
 _MODULES = ("apps", "cardiac", "core", "datasets", "errors", "figures", "io", "matching",
-            "options", "phantoms", "pipeline", "simulation", "threads", "tracking")
+            "options", "pedobarography", "phantoms", "pipeline", "simulation", "threads",
+            "tracking")
 
 __all__ = ["__version__", *sorted(_WHERE)]
 

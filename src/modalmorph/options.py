@@ -35,6 +35,7 @@ from .errors import OptionError
 __all__ = [
     "MatchOptions", "MorphOptions", "ReadOptions", "OutputOptions", "TrackOptions",
     "StrainOptions",
+    "StanceOptions",
     "OPTION_CLASSES", "REFERENCES", "CORRESPONDENCES", "flat_fields", "parameters", "split",
     "split_overrides", "parse_value", "METHODS", "ROTATIONS", "FREE_MOTIONS", "LOADS",
     "SCHEMES", "OBJECTS", "FRAME_SPACINGS", "STEP_MESHES", "K_RANGE", "DT_RANGE", "C_MAX",
@@ -415,6 +416,49 @@ class StrainOptions(_Options):
             raise OptionError(f"rv_point must be two numbers (x, y), got {self.rv_point!r}")
         if not isinstance(self.endo_only, bool):
             raise OptionError(f"endo_only must be true or false, got {self.endo_only!r}")
+
+
+@dataclass(frozen=True)
+class StanceOptions(_Options):
+    """How :func:`modalmorph.stance` reads a pressure stack and follows its loaded parts
+    (:mod:`modalmorph.io.pressure` says how the parts and their boundaries are found)."""
+
+    threshold: float | None = _opt(
+        None, "pressure above which a sensor is loaded, in the array's units (default: "
+        "fraction x the peak)", group="pressure", kind="float")
+    fraction: float = _opt(
+        0.02, "without threshold: the loaded level as a fraction of the stack's peak",
+        group="pressure", kind="float")
+    pixel_size: float = _opt(
+        1.0, "sensor pitch in mm: contours, areas and figures in mm (1: in sensors)",
+        group="pressure", kind="float")
+    smooth: float = _opt(
+        0.5, "Gaussian width (sensors) of the smoothing before the boundary is drawn "
+        "through the sensors (0: none)", group="pressure", kind="float")
+    min_sensors: int = _opt(
+        2, "smaller contacts (a single loaded sensor) are skipped, and said",
+        group="pressure", kind="int")
+    spacing: float = _opt(
+        0.5, "node spacing along a part's boundary at its largest, in sensors",
+        group="pressure", kind="float")
+    every: int = _opt(
+        1, "take every N-th frame (20: a 500 Hz plate at 25 Hz)", group="pressure",
+        kind="int")
+
+    def _check(self):
+        if self.threshold is not None and not _is_number(self.threshold):
+            raise OptionError(f"threshold must be a number, got {self.threshold!r}")
+        _check_range("fraction", self.fraction, 0.0, 1.0, "of the peak")
+        for name in ("pixel_size", "spacing"):
+            value = getattr(self, name)
+            if not (_is_number(value) and value > 0):
+                raise OptionError(f"{name} must be a number > 0, got {value!r}")
+        if not (_is_number(self.smooth) and self.smooth >= 0):
+            raise OptionError(f"smooth must be a number >= 0, got {self.smooth!r}")
+        for name in ("min_sensors", "every"):
+            value = getattr(self, name)
+            if not (_is_int(value) and value >= 1):
+                raise OptionError(f"{name} must be an integer >= 1, got {value!r}")
 
 
 OPTION_CLASSES = (ReadOptions, MatchOptions, MorphOptions, OutputOptions)

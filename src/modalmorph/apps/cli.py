@@ -1,5 +1,5 @@
 """The ``modalmorph`` command line: ``demo``, ``match``, ``morph``, ``track``, ``strain``,
-``batch`` and ``app``.
+``batch``, ``stance`` and ``footprints`` (:mod:`modalmorph.apps.stance`) and ``app``.
 
 The option flags are generated from the fields of the option classes
 (:mod:`modalmorph.options`, :class:`modalmorph.options.AlignOptions`,
@@ -28,6 +28,7 @@ from ..matching import match
 from ..options import MatchOptions, ReadOptions, flat_fields
 from ..version import __version__
 from . import batch, strain
+from . import stance as stance_app
 from .app import serve
 from .runs import (
     BATCH_CLASSES,
@@ -190,6 +191,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "exactly as the single commands write it, and write "
                           "OUT/summary.csv. Items already complete in OUT are skipped; a "
                           "failing item is recorded and the batch goes on."))
+    stance_app.add_parser(command, add_option_flags, _add_config, load_config)
     _app_parser(command("app", _run_app, "the interactive web application",
                         "Serve the method as a local web page: pick two shapes, set the "
                         "options, run, and explore the result."))
@@ -383,6 +385,8 @@ def _run_morph(args) -> int:
 
 
 def _run_track(args) -> int:
+    if stance_app.is_pressure_stack(args.inputs):  # every part, not one (issue 24)
+        return stance_app.track_stack(args)
     settings = _settings(args, SEQUENCE_CLASSES)
     with _progress(None, quiet=args.quiet, what="tracking", unit="frame") as progress:
         run = track_files(args.inputs, args.out, settings, progress=None if progress is None

@@ -29,7 +29,7 @@ _LEFTOVER = re.compile(r"^\..*\.modalmorph-tmp-(\d+)-[\w-]+$")
 # A folder that is replaced as a whole must be empty or hold one of these files (a previous
 # result of morph or of track).
 OUTPUT_MARKER = "result.json"
-OUTPUT_MARKERS = (OUTPUT_MARKER, "track.json")
+OUTPUT_MARKERS = (OUTPUT_MARKER, "track.json", "strain.json")
 # Seconds to sleep just before the final rename(s): read only here, set only by the tests
 # that kill a run at that moment.
 _PAUSE_ENV = "MODALMORPH_TEST_RENAME_PAUSE"
