@@ -44,7 +44,7 @@ from .errors import OptionError, ShapeError
 from .options import MatchOptions, MorphOptions, StrainOptions, TrackOptions
 from .tracking import track
 
-__all__ = ["Strain", "StrainOptions", "KINDS", "strain", "wall_strain", "mask_ring",
+__all__ = ["Strain", "KINDS", "strain", "wall_strain", "mask_ring",
            "DEFINITIONS"]
 
 log = logging.getLogger(__name__)

@@ -33,7 +33,7 @@ from .io.pressure import check_pressure, frame_parts, pressure_level
 from .options import MorphOptions, StanceOptions
 from .pipeline import morph
 
-__all__ = ["MIN_PART_NODES", "PartTrack", "Registration", "Stance", "StanceOptions",
+__all__ = ["MIN_PART_NODES", "PartTrack", "Registration", "Stance",
            "footprint_parts", "register_footprints", "stance"]
 
 log = logging.getLogger(__name__)

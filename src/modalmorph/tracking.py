@@ -35,7 +35,7 @@ from .options import (
 from .pipeline import Morph, morph
 from .threads import limit
 
-__all__ = ["REFERENCES", "CORRESPONDENCES", "Track", "TrackOptions", "track",
+__all__ = ["REFERENCES", "CORRESPONDENCES", "Track", "track",
            "curve_distance"]
 
 log = logging.getLogger(__name__)
