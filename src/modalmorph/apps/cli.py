@@ -393,10 +393,12 @@ def _run_track(args) -> int:
                           else (lambda frame, n_frames: progress(frame, None)))
     result = run.result
     if not args.quiet:
+        frame = result.frames[0].frame
+        unit = "input units" if frame is None else frame.unit
         closure = ("" if result.closure_error is None else
-                   f"; closure error {result.closure_error:.3g} (input units)")
+                   f"; closure error {result.closure_error:.3g} {unit}")
         print(f"{result.n_frames} frames of {result.points.shape[1]} nodes; largest distance "
-              f"to a frame {float(result.distance.max()):.3g} (input units); contour strain "
+              f"to a frame {float(result.distance.max()):.3g} {unit}; contour strain "
               f"{100 * result.strain.min():+.1f} % .. {100 * result.strain.max():+.1f} %"
               f"{closure}", file=sys.stderr)
         _list_files(run.files)

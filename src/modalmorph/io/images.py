@@ -260,8 +260,9 @@ def _choose_objects(mask: np.ndarray, choice, name: str) -> list[np.ndarray]:
     else:
         pick, why = choice - 1, "as asked"
     where = "touches the image border" if border[pick] else "inside the image"
-    _log.info("%s: object %d of %d (%s): %d px, %s", name, pick + 1, count, why,
-              area[pick], where)
+    _log.log(logging.INFO if count > 1 else logging.DEBUG,  # a choice is said, not a fact
+             "%s: object %d of %d (%s): %d px, %s", name, pick + 1, count, why, area[pick],
+             where)
     return [labels == pick + 1]
 
 
