@@ -1,10 +1,14 @@
 """Batches: many pairs and sequences, on a local process pool or a Dask cluster, resumable.
 
-Each item of a batch is one ``modalmorph morph`` (a source, target pair) or one
-``modalmorph track`` (a sequence of frames); it is computed and written by a worker into
-``OUT/<id>/``, exactly as the single command writes it (:func:`modalmorph.apps.runs.morph_files`,
-:func:`modalmorph.apps.runs.track_files`). The folder appears at once, by one rename of a
-finished staging folder, so a killed run leaves every item folder complete or absent.
+Each item of a batch is one ``modalmorph morph`` (a source, target pair), one
+``modalmorph track`` (a sequence of frames), one stance phase or one set of peak-pressure
+images registered to a template (:mod:`.pressure`); it is computed and written by a
+worker into ``OUT/<id>/``, exactly as the single command writes it
+(:func:`modalmorph.apps.runs.morph_files`, :func:`modalmorph.apps.runs.track_files`,
+``modalmorph stance``, ``modalmorph footprints``); pressure items also give
+``OUT/pressure.csv``, a row per subject and walking speed. The folder appears at once,
+by one rename of a finished staging folder, so a killed run leaves every item folder
+complete or absent.
 
 An item is skipped on the next run only when its folder answers it: the SHA-256 of its
 inputs and its options equal those its ``result.json`` (``track.json``) records; else it
@@ -28,6 +32,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ...errors import OptionError
+from ...options import StanceOptions
 from ..runs import Settings
 from .engines import ENGINES, Engine, SchedulerLost
 from .items import (
@@ -39,10 +44,12 @@ from .items import (
     summary_row,
 )
 from .manifest import Item, read_manifest
+from .pressure import pressure_items, write_groups
 from .summary import read_summary, write_summary
 
 __all__ = ["FIGURES", "ENGINES", "Engine", "Item", "ItemResult", "Batch", "SchedulerLost",
-           "read_manifest", "read_summary", "run", "run_item", "write_summary"]
+           "pressure_items", "read_manifest", "read_summary", "run", "run_item",
+           "write_summary"]
 
 log = logging.getLogger(__name__)
 
@@ -60,7 +67,8 @@ class Batch:
     counts : dict
         Items per status (``ok``, ``skipped``, ``failed``, ``interrupted``).
     files : tuple of Path
-        The summary files written (``summary.csv``, ``summary.parquet``, ``summary.png``).
+        The summary files written (``summary.csv``, ``summary.parquet``, ``summary.png``,
+        ``pressure.csv``).
     engine : str
         What ran the items, in words (e.g. ``"local process pool, 2 workers"``); empty
         when every item was skipped.
@@ -100,7 +108,8 @@ class Batch:
 def run(items: Sequence[Item], out, *, settings: Settings | None = None,
         figures: str = "none", force: bool = False, keep_stale: bool = False,
         engine: Engine | None = None,
-        progress: Callable[[ItemResult | None, int, int], None] | None = None) -> Batch:
+        progress: Callable[[ItemResult | None, int, int], None] | None = None,
+        pressure: StanceOptions | None = None) -> Batch:
     """Run the items of a batch that the disk does not answer; write ``out/summary.csv``.
 
     Parameters
@@ -127,6 +136,8 @@ def run(items: Sequence[Item], out, *, settings: Settings | None = None,
     progress : callable, optional
         Called as ``progress(None, 0, n)`` when the ``n`` items to compute are known,
         then as each of them ends: ``progress(row, n_done, n)``.
+    pressure : StanceOptions, optional
+        Options of the pressure items (level, sensor pitch, ...); an item's own win.
 
     Returns
     -------
@@ -142,7 +153,8 @@ def run(items: Sequence[Item], out, *, settings: Settings | None = None,
     since = time.time()
     remove_staging(out)  # of killed items, whether they are redone or skipped now
     settings = settings or Settings()
-    resume = Resume(out, settings, figures, force=force, keep_stale=keep_stale)
+    resume = Resume(out, settings, figures, force=force, keep_stale=keep_stale,
+                    pressure=pressure)
     outcomes, todo, notes = {}, [], {}
     for item in items:
         why = resume.why_redo(item)
@@ -154,14 +166,18 @@ def run(items: Sequence[Item], out, *, settings: Settings | None = None,
                 notes[item.id] = why
     log.info("%d of %d items to compute, %d complete in %s", len(todo), len(items),
              len(items) - len(todo), out)
-    state = _execute(todo, dict(out=out, settings=settings, figures=figures, force=True),
-                     engine or Engine(), outcomes, notes, progress)
+    state = _execute(todo, dict(out=out, settings=settings, figures=figures, force=True,
+                                pressure=pressure), engine or Engine(), outcomes, notes,
+                     progress)
     remove_staging(out)  # of items stopped midway
     unfinished = state["lost"] or "not finished when the batch was stopped"
     counts = Counter()
     rows = (summary_row(item, out, outcomes.get(item.id), since, unfinished)
             for item in items)
     files = write_summary(_counted(rows, counts), out, figure=figures == "summary")
+    done = {i for i, o in outcomes.items() if o.status in ("ok", "skipped")}
+    table = write_groups(items, out, done)
+    files += [table] if table is not None else []
     return Batch(out=out, counts=dict(counts), files=tuple(files), engine=state["engine"],
                  dashboard=state["dashboard"], interrupted=state["interrupted"],
                  lost=state["lost"])
