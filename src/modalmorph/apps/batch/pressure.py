@@ -64,9 +64,9 @@ def _read_file(path: str) -> tuple[np.ndarray, dict]:
     if Path(path).suffix.lower() not in (".npy", ".npz"):
         raise InputFileError(f"{path}: pressure files are NPY or NPZ arrays")
     try:
+        if Path(path).suffix.lower() == ".npy":
+            return np.load(path, allow_pickle=False), {}
         with np.load(path, allow_pickle=False) as data:
-            if isinstance(data, np.ndarray):
-                return data, {}
             key = "pressure" if "pressure" in data else data.files[0]
             array = data[key]
             meta = {k: data[k] for k in data.files if k != key and data[k].ndim == 1
