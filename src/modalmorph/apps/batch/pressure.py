@@ -253,10 +253,12 @@ def write_groups(items, out: Path, done: set) -> Path | None:
 
 
 def _natural(text: str):
+    """Numbers in order, then jiku-data's speeds slow, normal, fast, then other text."""
     try:
         return (0, float(text), "")
     except ValueError:
-        return (1, 0.0, text)
+        order = list(_SPEEDS.values())
+        return (1, order.index(text), "") if text in order else (2, 0.0, text)
 
 
 # ------------------------------------------------------------------------------ command line
