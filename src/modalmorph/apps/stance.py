@@ -34,6 +34,7 @@ __all__ = ["add_parser", "is_pressure_stack", "run", "run_footprints", "stance_f
 
 log = logging.getLogger(__name__)
 _JIKU = "jiku:"
+_SPEEDS = {1: "slow", 2: "normal", 3: "fast"}  # jiku-data's speed conditions
 
 
 def add_parser(command, add_option_flags, add_config, load_config) -> None:
@@ -147,9 +148,12 @@ def write_footprints(regs, folder: Path, columns: dict, record: dict, *,
                              " ".join(map(str, r.missing))])
     if not figure:
         return
-    fig = Figure(figsize=(min(len(regs), 20) * 0.7 + 1.5, 2.2 * -(-len(regs) // 20)),
+    fig = Figure(figsize=(min(len(regs), 20) * 0.7 + 1.5, 2.2 * -(-len(regs) // 20) + 0.3),
                  layout="constrained")
-    plot_footprints(regs, fig=fig, ncols=20)
+    said = columns.get("speed", [_SPEEDS.get(int(c), c) for c in columns.get("condition", ())])
+    titles = [f"{i} {said[i]}" if len(said) else f"{i}" for i in range(len(regs))]
+    plot_footprints(regs, fig=fig, ncols=20, titles=titles,
+                    unit="mm" if record["options"]["pixel_size"] != 1 else "sensors")
     fig.savefig(folder / "footprints.png", dpi=120)
 
 

@@ -124,12 +124,15 @@ def save_stance_figures(stance, out_dir, *, dpi: int = 150) -> list[Path]:
     return [out / "stance.png", out / "stance_energy.png"]
 
 
-def plot_footprints(registrations, *, titles=None, ncols: int = 10, fig=None):
+def plot_footprints(registrations, *, titles=None, ncols: int = 10, fig=None,
+                    unit: str = "mm"):
     """A grid of registered footprints (:func:`modalmorph.register_footprints`):
     each template part moved onto the image's part, coloured by the strain energy of
     its nodes (25) on one scale for all (up to the 98th percentile: a few folded
     registrations would grey out the rest), the node where it peaks marked (red +), the
-    template's parts left unpaired in grey.
+    template's parts left unpaired in grey; a scale bar in ``unit`` (the footprints'
+    coordinates: mm with a sensor pitch, else sensors) on the first, and a line saying
+    what the marks are.
 
     Returns
     -------
@@ -168,8 +171,23 @@ def plot_footprints(registrations, *, titles=None, ncols: int = 10, fig=None):
         ax.axis("off")
     axes[0].invert_yaxis()  # rows of the plate down, as the pressure images
     axes[0].autoscale()
+    _scale_bar(axes[0], unit)
     mappable = axes[0].collections[0] if axes[0].collections else None
     if mappable is not None:
         fig.colorbar(mappable, ax=list(axes), shrink=0.6, extend="max",
-                     label="node strain energy (25)")
+                     label="node strain energy, eq. (25)")
+    fig.suptitle("template parts registered onto each image, coloured by node strain "
+                 "energy; +: its peak; grey: a template part with no partner", fontsize=8)
     return fig
+
+
+def _scale_bar(ax, unit: str) -> None:
+    """A vertical bar of a round length (1, 2 or 5 x 10^k, at most 40 % of the shown
+    height) at the left of ``ax``, its length written beside it."""
+    (x0, _), (y0, y1) = ax.get_xlim(), sorted(ax.get_ylim())
+    most = 0.4 * (y1 - y0)
+    power = 10.0 ** np.floor(np.log10(most))
+    length = max(v * power for v in (1, 2, 5) if v * power <= most)
+    ax.plot([x0, x0], [y1, y1 - length], color="k", lw=2, clip_on=False)
+    ax.text(x0, y1 - length / 2, f"{length:g} {unit} ", ha="right", va="center",
+            rotation=90, fontsize=6)
