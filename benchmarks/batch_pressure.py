@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from modalmorph.apps import batch
+from modalmorph.apps.runs import Settings
 from modalmorph.io.pressure import jiku_conditions
 from modalmorph.options import StanceOptions
 
@@ -55,7 +56,7 @@ def stance_items(per_subject: int) -> list:
 def measure(name: str, items: list, out: Path, workers: int, options) -> None:
     start = time.perf_counter()
     done = batch.run(items, out, engine=batch.Engine("processes", workers=workers),
-                     pressure=options)
+                     settings=Settings(stance=options))
     wall = time.perf_counter() - start
     seconds = np.array([r.seconds for r in done.results if r.seconds is not None])
     print(f"{name}: {len(items)} items {done.counts} in {wall:.1f} s on {done.engine}; "

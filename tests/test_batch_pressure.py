@@ -12,13 +12,14 @@ import pytest
 from modalmorph.apps import batch
 from modalmorph.apps.batch.pressure import GROUP_COLUMNS, pressure_items
 from modalmorph.apps.cli import main
+from modalmorph.apps.runs import Settings
 from modalmorph.options import StanceOptions
 
 from .test_stance import synthetic_stance
 
 SUBJECTS = np.array([1, 1, 2, 2])
 SPEEDS = np.array(["slow", "fast", "slow", "fast"])
-LEVEL = StanceOptions(threshold=5.0)
+LEVEL = Settings(stance=StanceOptions(threshold=5.0))
 POOL = batch.Engine("processes", workers=2)
 
 
@@ -53,7 +54,7 @@ def test_stance_trials_match_the_single_command(trials, tmp_path):
     """Each item's folder is what ``modalmorph stance`` writes for that trial, and the
     table has a row per subject and speed with the trials' numbers."""
     done = batch.run(pressure_items(trials / "trials.npz"), tmp_path / "out",
-                     engine=POOL, pressure=LEVEL)
+                     engine=POOL, settings=LEVEL)
     assert done.ok and done.counts == {"ok": 4}
     np.save(tmp_path / "one.npy", np.load(trials / "trials.npz")["pressure"][2])
     assert main(["stance", str(tmp_path / "one.npy"), "--threshold", "5", "--out",
@@ -77,7 +78,7 @@ def test_footprints_per_subject_and_resume(trials, tmp_path):
     """Peak images registered per subject; a second run skips them; a changed option
     redoes them and says which."""
     items = pressure_items(trials / "peaks.npz")
-    done = batch.run(items, tmp_path, engine=POOL, pressure=LEVEL)
+    done = batch.run(items, tmp_path, engine=POOL, settings=LEVEL)
     assert done.counts == {"ok": 2}
     images = rows(tmp_path / "subject-2" / "footprints.csv")
     assert [(r["image"], r["subject"], r["speed"]) for r in images] == [
@@ -85,11 +86,12 @@ def test_footprints_per_subject_and_resume(trials, tmp_path):
     table = rows(tmp_path / "pressure.csv")
     assert len(table) == 4 and all(r["kind"] == "footprints" for r in table)
     assert all(float(r["area_mm2"]) > 0 for r in table)
-    again = batch.run(items, tmp_path, engine=POOL, pressure=LEVEL)
+    again = batch.run(items, tmp_path, engine=POOL, settings=LEVEL)
     assert again.counts == {"skipped": 2}
     assert rows(tmp_path / "pressure.csv") == table  # the table of the skipped items
     wider = batch.run(items, tmp_path, engine=POOL,
-                      pressure=StanceOptions(threshold=5.0, pixel_size=2.0))
+                      settings=Settings(stance=StanceOptions(threshold=5.0,
+                                                             pixel_size=2.0)))
     assert wider.counts == {"ok": 2}
     assert all("pixel_size 1 -> 2" in r.note for r in wider.results)
     doubled = rows(tmp_path / "pressure.csv")
@@ -139,9 +141,9 @@ def test_stance_trials_on_dask(trials, tmp_path):
     """The same items on a Dask LocalCluster give the same numbers as the process pool."""
     pytest.importorskip("distributed")
     items = pressure_items(trials / "trials.npz")[:2]
-    on_dask = batch.run(items, tmp_path / "dask", pressure=LEVEL,
+    on_dask = batch.run(items, tmp_path / "dask", settings=LEVEL,
                         engine=batch.Engine("dask", workers=1))
-    local = batch.run(items, tmp_path / "pool", pressure=LEVEL, engine=POOL)
+    local = batch.run(items, tmp_path / "pool", settings=LEVEL, engine=POOL)
     assert on_dask.engine.startswith("Dask LocalCluster") and on_dask.counts == {"ok": 2}
     assert local.counts == {"ok": 2}
     assert rows(tmp_path / "dask" / "pressure.csv") == rows(tmp_path / "pool" /

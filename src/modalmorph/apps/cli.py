@@ -413,14 +413,14 @@ def _run_app(args) -> int:
 
 def _run_batch(args) -> int:
     items = batch.pressure.batch_items(args.manifest, args.kind)
-    settings = _settings(args, BATCH_CLASSES)
+    settings = batch.pressure.batch_pressure(args, _settings(args, BATCH_CLASSES))
     engine = batch.Engine(args.engine, workers=args.workers, scheduler=args.scheduler)
     if engine.choice(len(items))[0]:
         _dask_logs(verbose=args.verbose)
     with _batch_progress(quiet=args.quiet) as progress:
         done = batch.run(items, args.out, settings=settings, figures=args.figures,
                          force=args.force, keep_stale=args.keep_stale, engine=engine,
-                         progress=progress, pressure=batch.pressure.batch_pressure(args))
+                         progress=progress)
     if not args.quiet:
         print(f"{len(items)} items: " + ", ".join(
             f"{done.counts[s]} {s}" for s in ("ok", "skipped", "failed", "interrupted")

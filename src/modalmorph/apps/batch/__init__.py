@@ -32,7 +32,6 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ...errors import OptionError
-from ...options import StanceOptions
 from ..runs import Settings
 from .engines import ENGINES, Engine, SchedulerLost
 from .items import (
@@ -108,8 +107,7 @@ class Batch:
 def run(items: Sequence[Item], out, *, settings: Settings | None = None,
         figures: str = "none", force: bool = False, keep_stale: bool = False,
         engine: Engine | None = None,
-        progress: Callable[[ItemResult | None, int, int], None] | None = None,
-        pressure: StanceOptions | None = None) -> Batch:
+        progress: Callable[[ItemResult | None, int, int], None] | None = None) -> Batch:
     """Run the items of a batch that the disk does not answer; write ``out/summary.csv``.
 
     Parameters
@@ -119,7 +117,8 @@ def run(items: Sequence[Item], out, *, settings: Settings | None = None,
     out : str or os.PathLike
         Output folder: ``out/<id>/`` per item, and the summary.
     settings : Settings, optional
-        Options for every item (:class:`modalmorph.apps.runs.Settings`); an item's own win.
+        Options for every item (:class:`modalmorph.apps.runs.Settings`; its ``stance``:
+        those of the pressure items); an item's own win.
     figures : {"none", "summary", "all"}, optional
         ``"none"`` (default): results only; ``"summary"``: also ``out/summary.png``,
         rendered once; ``"all"``: each item's figures and animation too, rendered by its
@@ -136,8 +135,6 @@ def run(items: Sequence[Item], out, *, settings: Settings | None = None,
     progress : callable, optional
         Called as ``progress(None, 0, n)`` when the ``n`` items to compute are known,
         then as each of them ends: ``progress(row, n_done, n)``.
-    pressure : StanceOptions, optional
-        Options of the pressure items (level, sensor pitch, ...); an item's own win.
 
     Returns
     -------
@@ -153,8 +150,7 @@ def run(items: Sequence[Item], out, *, settings: Settings | None = None,
     since = time.time()
     remove_staging(out)  # of killed items, whether they are redone or skipped now
     settings = settings or Settings()
-    resume = Resume(out, settings, figures, force=force, keep_stale=keep_stale,
-                    pressure=pressure)
+    resume = Resume(out, settings, figures, force=force, keep_stale=keep_stale)
     outcomes, todo, notes = {}, [], {}
     for item in items:
         why = resume.why_redo(item)
@@ -166,9 +162,8 @@ def run(items: Sequence[Item], out, *, settings: Settings | None = None,
                 notes[item.id] = why
     log.info("%d of %d items to compute, %d complete in %s", len(todo), len(items),
              len(items) - len(todo), out)
-    state = _execute(todo, dict(out=out, settings=settings, figures=figures, force=True,
-                                pressure=pressure), engine or Engine(), outcomes, notes,
-                     progress)
+    state = _execute(todo, dict(out=out, settings=settings, figures=figures, force=True),
+                     engine or Engine(), outcomes, notes, progress)
     remove_staging(out)  # of items stopped midway
     unfinished = state["lost"] or "not finished when the batch was stopped"
     counts = Counter()

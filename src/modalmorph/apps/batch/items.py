@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ...errors import OptionError
-from ...options import OutputOptions, StanceOptions
+from ...options import OutputOptions
 from ..runs import (
     PAIR_CLASSES,
     SEQUENCE_CLASSES,
@@ -89,15 +89,15 @@ class Outcome:
 
 
 def run_item(item: Item, out, *, settings: Settings | None = None, figures: str = "none",
-             force: bool = False, pressure: StanceOptions | None = None) -> ItemResult:
+             force: bool = False) -> ItemResult:
     """Compute one item into ``out/<id>/`` (the task each worker runs); never raises.
 
     The item is written into a hidden staging folder ``out/.<id>.<attempt>.partial/`` and
     renamed to ``out/<id>`` when complete, so ``out/<id>`` is complete or absent at every
     moment (two attempts of one item, e.g. on a worker thought lost, never share a
     folder). An item already complete there is skipped unless ``force``. ``settings`` are
-    the batch's (``pressure``: its pressure options); the item's own options override
-    them.
+    the batch's (``settings.stance``: the pressure items'); the item's own options
+    override them.
     """
     out = Path(out)
     final = out / item.id
@@ -108,7 +108,7 @@ def run_item(item: Item, out, *, settings: Settings | None = None, figures: str 
     try:
         staging.mkdir(parents=True)  # the writer's temporary folder then lives inside it
         if item.kind in PRESSURE_KINDS:
-            run_pressure(item, staging / item.id, pressure or StanceOptions(),
+            run_pressure(item, staging / item.id, (settings or Settings()).stance,
                          figures == "all")
         elif item.kind == "pair":
             own = item_settings(item, settings or Settings(), figures)
@@ -189,9 +189,8 @@ class Resume:
     """
 
     def __init__(self, out: Path, settings: Settings, figures: str, *, force: bool = False,
-                 keep_stale: bool = False, pressure: StanceOptions | None = None):
+                 keep_stale: bool = False):
         self.out, self.settings, self.figures = out, settings, figures
-        self.pressure = pressure or StanceOptions()
         self.force, self.keep_stale = force, keep_stale
         self._records: dict[str, dict] = {}
         self._files: dict[tuple, dict] = {}
@@ -215,7 +214,7 @@ class Resume:
     def _difference(self, item: Item, data: dict) -> str | None:
         if item.kind in PRESSURE_KINDS:
             try:
-                wanted = pressure_record(item, self.pressure, self._file)
+                wanted = pressure_record(item, self.settings.stance, self._file)
             except (OptionError, ValueError):
                 return "redone: its options are invalid"
             files, recorded = wanted["inputs"], data.get("inputs") or []

@@ -295,8 +295,9 @@ def batch_items(manifest, kind: str | None) -> list[Item]:
     return read_manifest(manifest)
 
 
-def batch_pressure(args) -> StanceOptions:
-    """The pressure options of ``modalmorph batch``'s flags."""
+def batch_pressure(args, settings):
+    """The batch's settings with the pressure options of ``modalmorph batch``'s flags."""
     values = {name: getattr(args, name) for name, _c, _f in flat_fields((StanceOptions,))
               if getattr(args, name, None) is not None}
-    return split(values, (StanceOptions,), where="options")[StanceOptions]
+    return replace(settings, stance=split(values, (StanceOptions,),
+                                          where="options")[StanceOptions])
