@@ -110,15 +110,19 @@ def test_manifest_rows_and_a_bad_trial_named(trials, tmp_path, capsys):
         "id,pressure,kind,trial,subject,speed,threshold,template\n"
         f"a,{trials / 'trials.npz'},stance,1,,,5,\n"
         f"b,{trials / 'peaks.npz'},footprints,,,,5,0\n"
-        "c,bad.npy,stance,,3,slow,5,\n")
+        "c,bad.npy,stance,,3,slow,5,\n"
+        f"d,{trials / 'peaks.npz'},footprints,,,,5,9\n")
     code = main(["batch", str(tmp_path / "list.csv"), "--out", str(tmp_path / "out"),
-                 "--workers", "2", "-q"])
+                 "--workers", "2", "--figures", "all", "-q"])
     assert code == 1  # an item failed, the others are written
     err = capsys.readouterr().err
     assert "c: failed:" in err and "frame 3" in err
+    assert "d: failed:" in err and "template must be mean or an image number 0..3" in err
     summary = {r["id"]: r for r in rows(tmp_path / "out" / "summary.csv")}
     assert summary["a"]["status"] == summary["b"]["status"] == "ok"
     assert not (tmp_path / "out" / "c").exists()  # nothing half-written
+    assert (tmp_path / "out" / "a" / "stance.png").is_file()  # the figures, with "all"
+    assert (tmp_path / "out" / "b" / "footprints.png").is_file()
     table = rows(tmp_path / "out" / "pressure.csv")
     assert {(r["kind"], r["subject"], r["speed"]) for r in table} == {
         ("stance", "1", "fast"), *(("footprints", str(s), v)
@@ -130,6 +134,8 @@ def test_bad_pressure_items_name_the_problem(trials, tmp_path):
         batch.Item(id="x", pressure=str(trials / "trials.npz"), study="walk")
     with pytest.raises(ValueError, match="fraction"):
         batch.Item(id="x", pressure="p.npy", study="stance", options={"fraction": 3})
+    with pytest.raises(ValueError, match="one trial"):
+        batch.Item(id="x", pressure="p.npy", study="stance", trials=(0, 1))
     np.save(tmp_path / "flat.npy", np.zeros((5, 6)))
     assert main(["batch", str(tmp_path / "flat.npy"), "--out", str(tmp_path / "o"),
                  "-q"]) == 2  # (H, W): not a file of many trials

@@ -97,6 +97,9 @@ class Item:
                              f"got kind {self.study!r}")
         if not all(isinstance(t, int) and t >= 0 for t in self.trials):
             raise ValueError(f"item {self.id!r}: trials are numbers >= 0, got {self.trials}")
+        if self.study == "stance" and len(self.trials) > 1:
+            raise ValueError(f"item {self.id!r}: a stance item takes one trial, got "
+                             f"{len(self.trials)}")
         split(dict(self.options), (StanceOptions,), where=f"item {self.id!r}")
 
     def settings(self, batch: Settings) -> Settings:

@@ -148,9 +148,10 @@ def run_pressure(item: Item, folder: Path, batch: StanceOptions, figures: bool) 
                 save_stance_figures(result, tmp)
         return
     template = item.template
-    if isinstance(template, str) and template != "mean":
-        raise OptionError(f"item {item.id!r}: template must be mean or an image number, "
-                          f"got {template!r}")
+    if not (template is None or template == "mean" or (
+            isinstance(template, int) and 0 <= template < len(pressure))):
+        raise OptionError(f"item {item.id!r}: template must be mean or an image number "
+                          f"0..{len(pressure) - 1}, got {template!r}")
     regs = register_footprints(pressure, template=template, options=opts)
     with atomic_output_dir(folder) as tmp:
         write_footprints(regs, Path(tmp), meta, dict(record, input=item.pressure),
@@ -187,6 +188,11 @@ def pressure_items(source, kind: str | None = None) -> list[Item]:
         raise OptionError(f"kind must be one of {PRESSURE_KINDS}, got {kind!r}")
     name = os.fspath(source)
     if name == JIKU:
+        from importlib.util import find_spec
+
+        if find_spec("jikudata") is None:
+            raise ImportError("jiku: the pressure data of Pataky et al. (2008) needs the "
+                              "optional package jiku-data (GPL-3): pip install jiku-data")
         if kind == "stance":
             return [Item(id=f"jiku-s{s}-t{t:02d}", pressure=f"{JIKU}:{s}:{t}", study=kind)
                     for s in range(10) for t in range(60)]
