@@ -7,9 +7,9 @@ The input is an NPY/NPZ pressure array, (T, H, W) or (H, W), or ``jiku:SUBJECT:T
 not a stack of masks) runs this too (:func:`is_pressure_stack`), so the forefoot and
 the toes are followed with the heel; stacks of masks and contour files are tracked as
 before. The folder holds ``result.json`` (options, level, events, per part its frames
-and how it began and ended), ``stance.csv`` (a row per part and frame: sensors, area,
-energy, fit), ``parts.npz`` (``part_<k>``: tracked nodes (F_p, m, 2), ``frames_<k>``)
-and the figures ``stance.png`` and ``stance_energy.png``.
+and how it began and ended, :func:`stance_summary`), ``stance.csv`` (a row per part
+and frame: sensors, area, energy, fit), ``parts.npz`` (``part_<k>``: tracked nodes
+(F_p, m, 2), ``frames_<k>``) and the figures ``stance.png`` and ``stance_energy.png``.
 """
 
 from __future__ import annotations
