@@ -236,9 +236,11 @@ def _track_parser(p) -> None:
 
 def _batch_parser(p) -> None:
     p.add_argument("manifest", type=Path, metavar="MANIFEST",
-                   help="CSV (columns id, source, target or frames, and any option below "
-                        "with underscores; cells are TOML values) or TOML ([[item]] tables "
-                        "with the same keys); paths relative to it")
+                   help="CSV (columns id, source, target or frames, or pressure with kind, "
+                        "trial, template, subject, speed, and any option below with "
+                        "underscores; cells are TOML values) or TOML ([[item]] tables with "
+                        "the same keys); paths relative to it. Or a pressure file of many "
+                        "trials (NPY/NPZ), or jiku (jiku-data's 600 trials): see --kind")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--workers", type=int, default=None,
                    help="worker processes on this machine (default: one per core)")
@@ -263,6 +265,7 @@ def _batch_parser(p) -> None:
                    help="also print Dask's log lines (quiet without)")
     _add_config(p)
     add_option_flags(p, BATCH_CLASSES)
+    batch.pressure.add_pressure_flags(p, {n for n, _c, _f in flat_fields(BATCH_CLASSES)})
 
 
 def _app_parser(p) -> None:
@@ -411,8 +414,8 @@ def _run_app(args) -> int:
 
 
 def _run_batch(args) -> int:
-    items = batch.read_manifest(args.manifest)
-    settings = _settings(args, BATCH_CLASSES)
+    items = batch.pressure.batch_items(args.manifest, args.kind)
+    settings = batch.pressure.batch_pressure(args, _settings(args, BATCH_CLASSES))
     engine = batch.Engine(args.engine, workers=args.workers, scheduler=args.scheduler)
     if engine.choice(len(items))[0]:
         _dask_logs(verbose=args.verbose)

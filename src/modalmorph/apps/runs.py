@@ -37,6 +37,7 @@ from ..options import (
     MorphOptions,
     OutputOptions,
     ReadOptions,
+    StanceOptions,
     TrackOptions,
     flat_fields,
     split,
@@ -59,18 +60,20 @@ SEQUENCE_CLASSES = (*PAIR_CLASSES, TrackOptions)
 BATCH_CLASSES = (ReadOptions, MatchOptions, MorphOptions, TrackOptions)
 FORM_CLASSES = (MatchOptions, MorphOptions)
 _ATTRIBUTE = {ReadOptions: "read", MatchOptions: "match", MorphOptions: "morph",
-              OutputOptions: "output", TrackOptions: "sequence"}
+              OutputOptions: "output", TrackOptions: "sequence", StanceOptions: "stance"}
 
 
 @dataclass(frozen=True)
 class Settings:
-    """Every option of one run, one object per stage."""
+    """Every option of one run, one object per stage (``stance``: the pressure items of
+    a batch)."""
 
     read: ReadOptions = field(default_factory=ReadOptions)
     match: MatchOptions = field(default_factory=MatchOptions)
     morph: MorphOptions = field(default_factory=MorphOptions)
     output: OutputOptions = field(default_factory=OutputOptions)
     sequence: TrackOptions = field(default_factory=TrackOptions)
+    stance: StanceOptions = field(default_factory=StanceOptions)
 
     @classmethod
     def from_flat(cls, values: dict, classes=SEQUENCE_CLASSES, *, where: str = "options"):

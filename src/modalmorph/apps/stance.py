@@ -7,9 +7,9 @@ The input is an NPY/NPZ pressure array, (T, H, W) or (H, W), or ``jiku:SUBJECT:T
 not a stack of masks) runs this too (:func:`is_pressure_stack`), so the forefoot and
 the toes are followed with the heel; stacks of masks and contour files are tracked as
 before. The folder holds ``result.json`` (options, level, events, per part its frames
-and how it began and ended), ``stance.csv`` (a row per part and frame: sensors, area,
-energy, fit), ``parts.npz`` (``part_<k>``: tracked nodes (F_p, m, 2), ``frames_<k>``)
-and the figures ``stance.png`` and ``stance_energy.png``.
+and how it began and ended, :func:`stance_summary`), ``stance.csv`` (a row per part
+and frame: sensors, area, energy, fit), ``parts.npz`` (``part_<k>``: tracked nodes
+(F_p, m, 2), ``frames_<k>``) and the figures ``stance.png`` and ``stance_energy.png``.
 """
 
 from __future__ import annotations
@@ -30,10 +30,11 @@ from ..options import StanceOptions, split
 from ..pedobarography import register_footprints, stance
 
 __all__ = ["add_parser", "is_pressure_stack", "run", "run_footprints", "stance_files",
-           "track_stack"]
+           "stance_summary", "track_stack", "write_footprints", "write_stance"]
 
 log = logging.getLogger(__name__)
 _JIKU = "jiku:"
+_SPEEDS = {1: "slow", 2: "normal", 3: "fast"}  # jiku-data's speed conditions
 
 
 def add_parser(command, add_option_flags, add_config, load_config) -> None:
@@ -108,8 +109,8 @@ def run_footprints(args) -> int:
                           f"got {args.template!r}")
     regs = register_footprints(images, template=template, options=opts)
     with atomic_output_dir(args.out) as tmp:
-        _write_footprints(regs, Path(tmp), columns, dict(input=name, template=template,
-                                                         options=opts.record()))
+        write_footprints(regs, Path(tmp), columns, dict(input=name, template=template,
+                                                        options=opts.record()))
     if not args.quiet:
         energy = np.array([r.energy for r in regs])
         print(f"{len(regs)} images registered; strain energy median {np.median(energy):.4g}"
@@ -125,7 +126,11 @@ def _number(text: str) -> int:
         raise OptionError(f"template must be mean or an image number, got {text!r}") from None
 
 
-def _write_footprints(regs, folder: Path, columns: dict, record: dict) -> None:
+def write_footprints(regs, folder: Path, columns: dict, record: dict, *,
+                     figure: bool = True) -> None:
+    """Write ``result.json`` (``record`` and the template's parts), ``footprints.csv`` (a
+    row per image, with the per-image ``columns``) and, with ``figure``,
+    ``footprints.png``."""
     from matplotlib.figure import Figure
 
     n_parts = len(regs[0].template)
@@ -141,9 +146,14 @@ def _write_footprints(regs, folder: Path, columns: dict, record: dict) -> None:
                              f"{r.energy:.6g}", *(f"{e:.6g}" for e in r.part_energy),
                              r.peak_part, f"{r.peak[0]:.4g}", f"{r.peak[1]:.4g}",
                              " ".join(map(str, r.missing))])
-    fig = Figure(figsize=(min(len(regs), 20) * 0.7 + 1.5, 2.2 * -(-len(regs) // 20)),
+    if not figure:
+        return
+    fig = Figure(figsize=(min(len(regs), 20) * 0.7 + 1.5, 2.2 * -(-len(regs) // 20) + 0.3),
                  layout="constrained")
-    plot_footprints(regs, fig=fig, ncols=20)
+    said = columns.get("speed", [_SPEEDS.get(int(c), c) for c in columns.get("condition", ())])
+    titles = [f"{i} {said[i]}" if len(said) else f"{i}" for i in range(len(regs))]
+    plot_footprints(regs, fig=fig, ncols=20, titles=titles,
+                    unit="mm" if record["options"]["pixel_size"] != 1 else "sensors")
     fig.savefig(folder / "footprints.png", dpi=120)
 
 
@@ -157,7 +167,7 @@ def stance_files(source, out, options: StanceOptions, *, quiet: bool = False) ->
         pressure = read_pressure(source)
     result = stance(pressure, options=options, name=name)
     with atomic_output_dir(out) as tmp:
-        _write(result, Path(tmp), name)
+        write_stance(result, Path(tmp), name)
         figures = save_stance_figures(result, tmp)
     if not quiet:
         fit = max(float(p.node_distance.max()) for p in result.parts)
@@ -169,13 +179,30 @@ def stance_files(source, out, options: StanceOptions, *, quiet: bool = False) ->
     return 0
 
 
-def _write(result, folder: Path, name: str) -> None:
+def stance_summary(result) -> dict:
+    """One stance phase in numbers: the largest loaded area (all parts, mm^2), the total
+    strain energy, where the energy peaks (the centroid of the part and frame of the
+    largest part energy, mm) and the largest node-to-boundary distance (mm)."""
+    areas = np.zeros(result.n_frames)
+    for p in result.parts:
+        areas[p.frames] += p.area
+    top = max(result.parts, key=lambda p: float(p.energy.max()))
+    peak = top.points[int(np.argmax(top.energy))].mean(axis=0)
+    return dict(area_mm2=float(areas.max()), energy=float(result.energy.sum()),
+                peak_x_mm=float(peak[0]), peak_y_mm=float(peak[1]),
+                node_distance_mm=max(float(p.node_distance.max()) for p in result.parts))
+
+
+def write_stance(result, folder: Path, name: str, extra: dict | None = None) -> None:
+    """Write ``result.json`` (with :func:`stance_summary`; ``extra`` over it), ``stance.csv``
+    and ``parts.npz`` of a :class:`~modalmorph.Stance` into ``folder``."""
     parts = [dict(part=p.part, frames=(result.frames[p.frames]).tolist(), nodes=int(
         p.points.shape[1]), start=p.start, end=p.end) for p in result.parts]
     record = dict(input=name, level=result.level, pixel_size=result.pixel_size,
                   frames=result.frames.tolist(), options=result.params,
                   events=list(result.events), parts=parts,
-                  energy=result.energy.tolist())
+                  energy=result.energy.tolist(), summary=stance_summary(result))
+    record.update(extra or {})
     (folder / "result.json").write_text(json.dumps(record, indent=1))
     with open(folder / "stance.csv", "w", newline="") as fh:
         writer = csv.writer(fh)

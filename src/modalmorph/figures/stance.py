@@ -2,7 +2,8 @@
 part over the pressure image through stance, and the strain energy per part.
 
 The plate is drawn as it is read: rows down (the walking direction), columns across, in
-mm (the sensor pitch), the pressure in the array's units.
+mm (the sensor pitch), the pressure in the array's units (``pressure_unit`` names them).
+A sensor's square is centred on its (column, row) x pitch, where the contours put it.
 """
 
 from __future__ import annotations
@@ -14,16 +15,29 @@ import numpy as np
 from ._draw import ENERGY_RANGE, import_matplotlib
 
 __all__ = ["MAX_PANELS", "plot_footprints", "plot_part_energy", "plot_stance_frames",
-           "save_stance_figures"]
+           "pressure_label", "save_stance_figures"]
 
 MAX_PANELS = 8  # frames drawn side by side at most (8 footprints of 33 x 63 sensors fit A4)
-_CYCLE = "tab10"
+# Part colours: 20 distinct ones (a real stance phase has up to 18 parts; tab10 gave
+# parts 0 and 10 one colour).
+_CYCLE, _COLOURS = "tab20", 20
 
 
 def _colour(part: int):
     import matplotlib
 
-    return matplotlib.colormaps[_CYCLE](part % 10)
+    return matplotlib.colormaps[_CYCLE](part % _COLOURS)
+
+
+def _length_unit(pixel_size: float) -> str:
+    return "mm" if pixel_size != 1 else "sensors"
+
+
+def pressure_label(params: dict) -> str:
+    """The colour bar's name: pressure and its unit (``pressure_unit``), else said to
+    be the input's."""
+    unit = (params or {}).get("pressure_unit") or "the input's units"
+    return f"pressure ({unit})"
 
 
 def plot_stance_frames(stance, *, frames=None, fig=None):
@@ -65,10 +79,10 @@ def plot_stance_frames(stance, *, frames=None, fig=None):
                 ax.plot(*np.vstack([p, p[:1]]).T, ".-", color=_colour(part.part), ms=2,
                         lw=0.6)
         ax.set_title(f"frame {stance.frames[f]}", fontsize=8)
-        ax.set_xlabel("mm" if px != 1 else "sensors", fontsize=8)
+        ax.set_xlabel(f"x ({_length_unit(px)})", fontsize=8)
         ax.tick_params(labelsize=7)
-    axes[0].set_ylabel("mm" if px != 1 else "sensors", fontsize=8)
-    fig.colorbar(image, ax=list(axes), shrink=0.8, label="pressure")
+    axes[0].set_ylabel(f"y ({_length_unit(px)}), walking direction", fontsize=8)
+    fig.colorbar(image, ax=list(axes), shrink=0.8, label=pressure_label(stance.params))
     return fig
 
 
@@ -86,10 +100,12 @@ def plot_part_energy(stance, *, ax=None):
             ax.plot(frames[part.frames[1:]], part.energy[1:], ".-", color=_colour(part.part),
                     lw=1, label=f"part {part.part}")
     ax.plot(frames, stance.energy, "k-", lw=2, label="all parts")
-    ax.set_xlabel("frame")
-    ax.set_ylabel("strain energy per frame (22)")
+    ax.set_xlabel("frame of the input")
+    ax.set_ylabel("strain energy per frame, eq. (22)")
     ax.set_yscale("symlog", linthresh=max(1e-3, float(np.nanmax(stance.energy)) * 1e-3))
-    ax.legend(fontsize=7, ncols=4, loc="upper left")
+    # beside the axes (the layout makes room for it): inside, it hid the curves' peaks
+    ax.figure.legend(*ax.get_legend_handles_labels(), fontsize=7,
+                     ncols=1 + len(stance.parts) // 12, loc="outside right upper")
     return ax
 
 
@@ -102,18 +118,21 @@ def save_stance_figures(stance, out_dir, *, dpi: int = 150) -> list[Path]:
     out = Path(out_dir)
     fig = plot_stance_frames(stance)
     fig.savefig(out / "stance.png", dpi=dpi)
-    energy = Figure(figsize=(6.4, 3.6), layout="constrained")
+    energy = Figure(figsize=(7.4, 3.6), layout="constrained")
     plot_part_energy(stance, ax=energy.add_subplot())
     energy.savefig(out / "stance_energy.png", dpi=dpi)
     return [out / "stance.png", out / "stance_energy.png"]
 
 
-def plot_footprints(registrations, *, titles=None, ncols: int = 10, fig=None):
+def plot_footprints(registrations, *, titles=None, ncols: int = 10, fig=None,
+                    unit: str = "mm"):
     """A grid of registered footprints (:func:`modalmorph.register_footprints`):
     each template part moved onto the image's part, coloured by the strain energy of
     its nodes (25) on one scale for all (up to the 98th percentile: a few folded
     registrations would grey out the rest), the node where it peaks marked (red +), the
-    template's parts left unpaired in grey.
+    template's parts left unpaired in grey; a scale bar in ``unit`` (the footprints'
+    coordinates: mm with a sensor pitch, else sensors) on the first, and a line saying
+    what the marks are.
 
     Returns
     -------
@@ -152,8 +171,23 @@ def plot_footprints(registrations, *, titles=None, ncols: int = 10, fig=None):
         ax.axis("off")
     axes[0].invert_yaxis()  # rows of the plate down, as the pressure images
     axes[0].autoscale()
+    _scale_bar(axes[0], unit)
     mappable = axes[0].collections[0] if axes[0].collections else None
     if mappable is not None:
         fig.colorbar(mappable, ax=list(axes), shrink=0.6, extend="max",
-                     label="node strain energy (25)")
+                     label="node strain energy, eq. (25)")
+    fig.suptitle("template parts registered onto each image, coloured by node strain "
+                 "energy; +: its peak; grey: a template part with no partner", fontsize=8)
     return fig
+
+
+def _scale_bar(ax, unit: str) -> None:
+    """A vertical bar of a round length (1, 2 or 5 x 10^k, at most 40 % of the shown
+    height) at the left of ``ax``, its length written beside it."""
+    (x0, _), (y0, y1) = ax.get_xlim(), sorted(ax.get_ylim())
+    most = 0.4 * (y1 - y0)
+    power = 10.0 ** np.floor(np.log10(most))
+    length = max(v * power for v in (1, 2, 5) if v * power <= most)
+    ax.plot([x0, x0], [y1, y1 - length], color="k", lw=2, clip_on=False)
+    ax.text(x0, y1 - length / 2, f"{length:g} {unit} ", ha="right", va="center",
+            rotation=90, fontsize=6)

@@ -110,6 +110,9 @@ class StanceOptions(Options):
     every: int = option(
         1, "take every N-th frame (20: a 500 Hz plate at 25 Hz)", group="pressure",
         kind="int")
+    pressure_unit: str = option(
+        "", "unit of the pressure values (e.g. kPa), named on the figures' colour bars "
+        "(empty: 'the input's units')", group="pressure", kind="str")
 
     def _check(self):
         if self.threshold is not None and not is_number(self.threshold):
@@ -121,6 +124,8 @@ class StanceOptions(Options):
                 raise OptionError(f"{name} must be a number > 0, got {value!r}")
         if not (is_number(self.smooth) and self.smooth >= 0):
             raise OptionError(f"smooth must be a number >= 0, got {self.smooth!r}")
+        if not isinstance(self.pressure_unit, str):
+            raise OptionError(f"pressure_unit must be text, got {self.pressure_unit!r}")
         for name in ("min_sensors", "every"):
             value = getattr(self, name)
             if not (is_int(value) and value >= 1):

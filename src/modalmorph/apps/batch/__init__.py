@@ -1,10 +1,14 @@
 """Batches: many pairs and sequences, on a local process pool or a Dask cluster, resumable.
 
-Each item of a batch is one ``modalmorph morph`` (a source, target pair) or one
-``modalmorph track`` (a sequence of frames); it is computed and written by a worker into
-``OUT/<id>/``, exactly as the single command writes it (:func:`modalmorph.apps.runs.morph_files`,
-:func:`modalmorph.apps.runs.track_files`). The folder appears at once, by one rename of a
-finished staging folder, so a killed run leaves every item folder complete or absent.
+Each item of a batch is one ``modalmorph morph`` (a source, target pair), one
+``modalmorph track`` (a sequence of frames), one stance phase or one set of peak-pressure
+images registered to a template (:mod:`.pressure`); it is computed and written by a
+worker into ``OUT/<id>/``, exactly as the single command writes it
+(:func:`modalmorph.apps.runs.morph_files`, :func:`modalmorph.apps.runs.track_files`,
+``modalmorph stance``, ``modalmorph footprints``); pressure items also give
+``OUT/pressure.csv``, a row per subject and walking speed. The folder appears at once,
+by one rename of a finished staging folder, so a killed run leaves every item folder
+complete or absent.
 
 An item is skipped on the next run only when its folder answers it: the SHA-256 of its
 inputs and its options equal those its ``result.json`` (``track.json``) records; else it
@@ -39,10 +43,12 @@ from .items import (
     summary_row,
 )
 from .manifest import Item, read_manifest
+from .pressure import pressure_items, write_groups
 from .summary import read_summary, write_summary
 
 __all__ = ["FIGURES", "ENGINES", "Engine", "Item", "ItemResult", "Batch", "SchedulerLost",
-           "read_manifest", "read_summary", "run", "run_item", "write_summary"]
+           "pressure_items", "read_manifest", "read_summary", "run", "run_item",
+           "write_summary"]
 
 log = logging.getLogger(__name__)
 
@@ -60,7 +66,8 @@ class Batch:
     counts : dict
         Items per status (``ok``, ``skipped``, ``failed``, ``interrupted``).
     files : tuple of Path
-        The summary files written (``summary.csv``, ``summary.parquet``, ``summary.png``).
+        The summary files written (``summary.csv``, ``summary.parquet``, ``summary.png``,
+        ``pressure.csv``).
     engine : str
         What ran the items, in words (e.g. ``"local process pool, 2 workers"``); empty
         when every item was skipped.
@@ -110,7 +117,8 @@ def run(items: Sequence[Item], out, *, settings: Settings | None = None,
     out : str or os.PathLike
         Output folder: ``out/<id>/`` per item, and the summary.
     settings : Settings, optional
-        Options for every item (:class:`modalmorph.apps.runs.Settings`); an item's own win.
+        Options for every item (:class:`modalmorph.apps.runs.Settings`; its ``stance``:
+        those of the pressure items); an item's own win.
     figures : {"none", "summary", "all"}, optional
         ``"none"`` (default): results only; ``"summary"``: also ``out/summary.png``,
         rendered once; ``"all"``: each item's figures and animation too, rendered by its
@@ -162,6 +170,9 @@ def run(items: Sequence[Item], out, *, settings: Settings | None = None,
     rows = (summary_row(item, out, outcomes.get(item.id), since, unfinished)
             for item in items)
     files = write_summary(_counted(rows, counts), out, figure=figures == "summary")
+    done = {i for i, o in outcomes.items() if o.status in ("ok", "skipped")}
+    table = write_groups(items, out, done)
+    files += [table] if table is not None else []
     return Batch(out=out, counts=dict(counts), files=tuple(files), engine=state["engine"],
                  dashboard=state["dashboard"], interrupted=state["interrupted"],
                  lost=state["lost"])

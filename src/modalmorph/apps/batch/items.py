@@ -27,12 +27,14 @@ from ..runs import (
     track_files,
 )
 from .manifest import Item
+from .pressure import PRESSURE_KINDS, pressure_record, read_numbers, run_pressure
 
 __all__ = ["ItemResult", "Outcome", "Resume", "RESULT_FILE", "STAGING_SUFFIX", "run_item",
            "failed_row", "read_row", "summary_row", "remove_staging"]
 
 # The file that makes an item's folder complete (written last by morph / track).
-RESULT_FILE = {"pair": "result.json", "sequence": "track.json"}
+RESULT_FILE = {"pair": "result.json", "sequence": "track.json", "stance": "result.json",
+               "footprints": "result.json"}
 # Hidden staging folders: OUT/.<id>.<attempt>.partial, one per attempt of an item.
 STAGING_SUFFIX = ".partial"
 # Input files whose SHA-256 is kept while a batch is planned (shared by many items).
@@ -94,7 +96,8 @@ def run_item(item: Item, out, *, settings: Settings | None = None, figures: str 
     renamed to ``out/<id>`` when complete, so ``out/<id>`` is complete or absent at every
     moment (two attempts of one item, e.g. on a worker thought lost, never share a
     folder). An item already complete there is skipped unless ``force``. ``settings`` are
-    the batch's; the item's own options override them.
+    the batch's (``settings.stance``: the pressure items'); the item's own options
+    override them.
     """
     out = Path(out)
     final = out / item.id
@@ -104,11 +107,15 @@ def run_item(item: Item, out, *, settings: Settings | None = None, figures: str 
     start = time.perf_counter()
     try:
         staging.mkdir(parents=True)  # the writer's temporary folder then lives inside it
-        own = item_settings(item, settings or Settings(), figures)
-        if item.kind == "pair":
+        if item.kind in PRESSURE_KINDS:
+            run_pressure(item, staging / item.id, (settings or Settings()).stance,
+                         figures == "all")
+        elif item.kind == "pair":
+            own = item_settings(item, settings or Settings(), figures)
             morph_files(item.source, item.target, staging / item.id, own)
         else:
-            track_files(list(item.frames), staging / item.id, own)
+            track_files(list(item.frames), staging / item.id,
+                        item_settings(item, settings or Settings(), figures))
         _publish(staging / item.id, final)
         return read_row(item, final, "ok", seconds=time.perf_counter() - start)
     except Exception as exc:  # any failure of one item is recorded; the batch goes on
@@ -134,7 +141,9 @@ def read_row(item: Item, folder: Path, status: str, *, seconds: float | None = N
              note: str = "") -> ItemResult:
     """The summary row of an item from the results written in its folder."""
     data = json.loads((folder / RESULT_FILE[item.kind]).read_text(encoding="utf-8"))
-    if item.kind == "pair":
+    if item.kind in PRESSURE_KINDS:
+        numbers = read_numbers(item, folder, data)
+    elif item.kind == "pair":
         numbers = dict(steps=data["steps"], converged=data["converged"],
                        distance=data.get("distance"), tolerance=data.get("tolerance"),
                        energy=data["energy"][-1])
@@ -203,15 +212,23 @@ class Resume:
         return self._difference(item, data)
 
     def _difference(self, item: Item, data: dict) -> str | None:
-        files = (input_records(list(item.frames)) if item.frames
-                 else [self._file(item.source), self._file(item.target)])
-        recorded = data.get("input_files" if item.frames else "inputs") or []
+        if item.kind in PRESSURE_KINDS:
+            try:
+                wanted = pressure_record(item, self.settings.stance, self._file)
+            except (OptionError, ValueError):
+                return "redone: its options are invalid"
+            files, recorded = wanted["inputs"], data.get("inputs") or []
+        else:
+            files = (input_records(list(item.frames)) if item.frames
+                     else [self._file(item.source), self._file(item.target)])
+            recorded = data.get("input_files" if item.frames else "inputs") or []
         if [r["sha256"] for r in files] != [r.get("sha256") for r in recorded]:
             changed = [Path(r["path"]).name for r, old in zip(files, recorded, strict=False)
                        if r["sha256"] != old.get("sha256")]
             return ("redone: inputs changed" + (f" ({', '.join(changed[:_NAMED_CHANGES])})"
                                                 if changed else " (number of files)"))
-        wanted, old = self._record(item), data.get("options") or {}
+        wanted = wanted["options"] if item.kind in PRESSURE_KINDS else self._record(item)
+        old = data.get("options") or {}
         changes = [f"{k} {_text(old.get(k))} -> {_text(v)}" for k, v in wanted.items()
                    if old.get(k) != v]
         if not changes:

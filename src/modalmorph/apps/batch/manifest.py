@@ -1,7 +1,9 @@
 """Manifests: the items of a batch, from a CSV or TOML file.
 
-An :class:`Item` is one ``modalmorph morph`` (a source, target pair) or one ``modalmorph
-track`` (a sequence of frames) with its own options; :func:`read_manifest` reads them.
+An :class:`Item` is one ``modalmorph morph`` (a source, target pair), one ``modalmorph
+track`` (a sequence of frames), one stance phase or one set of peak-pressure images
+registered to a template (:mod:`.pressure`) with its own options; :func:`read_manifest`
+reads them.
 """
 
 from __future__ import annotations
@@ -12,11 +14,16 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ...options import StanceOptions, split
 from ..runs import BATCH_CLASSES, Settings
 
-__all__ = ["Item", "read_manifest"]
+__all__ = ["Item", "PRESSURE_KINDS", "read_manifest"]
 
-_PATH_KEYS = ("id", "source", "target", "frames")
+PRESSURE_KINDS = ("stance", "footprints")
+_PATH_KEYS = ("id", "source", "target", "frames", "pressure")
+# Manifest cells of a pressure item that are not options: which trials, the template,
+# and the metadata that groups the batch's table (per subject and walking speed).
+_PRESSURE_KEYS = ("kind", "trial", "trials", "template", "subject", "speed")
 # Option sets of items found valid (checking one costs 0.8 ms: 0.8 s for 1 000 items).
 _VALID_OPTIONS: set[str] = set()
 _VALID_OPTIONS_KEPT = 4096
@@ -37,8 +44,19 @@ class Item:
         pattern, a folder, a stack, or several files); empty for a pair.
     options : dict
         Options for this item by flat name, as in a ``--config`` file (those of
-        :func:`modalmorph.track` included: ``reference``, ``cycle``, ...); they override
+        :func:`modalmorph.track` included: ``reference``, ``cycle``, ...; a pressure
+        item's are those of :class:`~modalmorph.options.StanceOptions`); they override
         the batch's options.
+    pressure : str or None
+        A pressure item's input: an NPY/NPZ file or ``jiku:S[:T]`` (:mod:`.pressure`).
+    study : str
+        A pressure item's kind, ``"stance"`` or ``"footprints"``; empty otherwise.
+    trials : tuple of int
+        The trials of a file of many that the item takes (empty: the whole file).
+    template : int, "mean" or None
+        The template of ``footprints`` (None: the most typical image).
+    meta : dict
+        Metadata of the item's trials (``subject``, ``speed``) where the file has none.
     """
 
     id: str
@@ -46,12 +64,20 @@ class Item:
     target: str | None = None
     frames: tuple = ()
     options: dict = field(default_factory=dict)
+    pressure: str | None = None
+    study: str = ""
+    trials: tuple = ()
+    template: int | str | None = None
+    meta: dict = field(default_factory=dict)
 
     def __post_init__(self):
         if not isinstance(self.id, str) or not self.id or self.id.startswith(".") \
                 or any(c in self.id for c in '/\\:*?"<>|'):
             raise ValueError(f"item id must be a plain folder name (no path separators, "
                              f"not starting with '.'), got {self.id!r}")
+        if self.pressure is not None or self.study:
+            self._check_pressure()
+            return
         pair = self.source is not None and self.target is not None
         if pair == bool(self.frames) or (not pair and (self.source or self.target)):
             raise ValueError(f"item {self.id!r}: give either source and target (a pair) "
@@ -63,6 +89,19 @@ class Item:
                 _VALID_OPTIONS.clear()
             _VALID_OPTIONS.add(key)
 
+    def _check_pressure(self) -> None:
+        if self.study not in PRESSURE_KINDS or not self.pressure or self.source \
+                or self.target or self.frames:
+            raise ValueError(f"item {self.id!r}: a pressure item gives pressure (a file or "
+                             f"jiku:S[:T]) and kind {' or '.join(PRESSURE_KINDS)}, "
+                             f"got kind {self.study!r}")
+        if not all(isinstance(t, int) and t >= 0 for t in self.trials):
+            raise ValueError(f"item {self.id!r}: trials are numbers >= 0, got {self.trials}")
+        if self.study == "stance" and len(self.trials) > 1:
+            raise ValueError(f"item {self.id!r}: a stance item takes one trial, got "
+                             f"{len(self.trials)}")
+        split(dict(self.options), (StanceOptions,), where=f"item {self.id!r}")
+
     def settings(self, batch: Settings) -> Settings:
         """The batch's settings with this item's options over them."""
         return Settings.from_flat({**batch.flat(BATCH_CLASSES), **self.options},
@@ -70,12 +109,15 @@ class Item:
 
     @property
     def kind(self) -> str:
-        """``"pair"`` or ``"sequence"``."""
-        return "sequence" if self.frames else "pair"
+        """``"pair"``, ``"sequence"``, ``"stance"`` or ``"footprints"``."""
+        return self.study or ("sequence" if self.frames else "pair")
 
     @property
     def inputs(self) -> str:
         """The inputs in one line, for the summary."""
+        if self.pressure is not None:
+            picked = f" trials {' '.join(map(str, self.trials))}" if self.trials else ""
+            return f"{self.pressure}{picked}"
         return " ".join(self.frames) if self.frames else f"{self.source} {self.target}"
 
 
@@ -149,8 +191,10 @@ def _csv_rows(path: Path):
 
     with open(path, newline="", encoding="utf-8-sig") as fh:
         reader = csv.DictReader(fh, skipinitialspace=True)
-        if not reader.fieldnames or not {"source", "frames"} & set(reader.fieldnames):
-            raise ValueError(f"{path}: the header must name source,target and/or frames, "
+        if not reader.fieldnames or not {"source", "frames", "pressure"} & set(
+                reader.fieldnames):
+            raise ValueError(f"{path}: the header must name source,target, frames and/or "
+                             f"pressure, "
                              f"got {reader.fieldnames}")
         rows = []
         for row in reader:
@@ -170,6 +214,9 @@ def _resolve(row: dict, base: Path) -> dict:
     def absolute(p):
         return os.fspath(p if Path(p).is_absolute() else base.absolute() / p)
 
+    if "pressure" in entry:
+        _pressure_entry(entry, row, absolute)
+
     for key in ("source", "target"):
         if key in entry:
             entry[key] = absolute(str(entry[key]))
@@ -178,7 +225,11 @@ def _resolve(row: dict, base: Path) -> dict:
         entry["frames"] = tuple(absolute(str(f)) for f in
                                 (frames if isinstance(frames, list) else [frames]))
     if "id" not in entry:
-        if "frames" in entry:
+        if "pressure" in entry:
+            name = entry["pressure"]
+            entry["id"] = name.replace(":", "-") if name.startswith("jiku:") else \
+                Path(name).stem + "".join(f"-{t}" for t in entry.get("trials", ()))
+        elif "frames" in entry:
             first = Path(entry["frames"][0])
             entry["id"] = first.parent.name if any(c in first.name for c in "*?[") \
                 else first.stem
@@ -187,3 +238,19 @@ def _resolve(row: dict, base: Path) -> dict:
     entry["id"] = str(entry["id"])
     entry["options"] = row
     return entry
+
+
+def _pressure_entry(entry: dict, row: dict, absolute) -> None:
+    """A pressure row's item arguments: its kind (default: ``footprints`` for
+    ``jiku:S``, else ``stance``), trials, template and metadata."""
+    cells = {key: row.pop(key) for key in _PRESSURE_KEYS if key in row}
+    name = str(entry["pressure"])
+    jiku = name.startswith("jiku:")
+    entry["pressure"] = name if jiku else absolute(name)
+    entry["study"] = str(cells.pop("kind", "footprints" if jiku and name.count(":") == 1
+                                   else "stance"))
+    trials = cells.pop("trials", cells.pop("trial", []))
+    entry["trials"] = tuple(trials if isinstance(trials, list) else [trials])
+    if "template" in cells:
+        entry["template"] = cells.pop("template")
+    entry["meta"] = cells
