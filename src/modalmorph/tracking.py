@@ -186,8 +186,9 @@ def track(frames, *, options: TrackOptions | None = None,
     morph_opts = _as_options(morph_options, MorphOptions, "morph_options")
     shapes, names = _frames(frames, names, opts.start_node)
     _check_segments(shapes[0], names[0], opts)
+    _check_normal(shapes[0], opts.correspondence)
     step = partial(_morph_frame, names=names, match_options=match_opts,
-                   morph_options=morph_opts)
+                   morph_options=morph_opts, normal=opts.correspondence == "normal")
     first = shapes[0]
     with limit(max(shape.m for shape in shapes)):
         morphs = _follow(shapes, opts.reference, step, progress)
@@ -222,12 +223,18 @@ def _follow(shapes, reference: str, step, progress) -> list:
 
 
 def _morph_frame(source: Shape, target: Shape, f: int, *, names: tuple,
-                 match_options: MatchOptions | None, morph_options: MorphOptions) -> Morph:
-    """One frame's morph: pairs (nearest, or modal with ``match_options``), then
-    :func:`modalmorph.morph`; errors name the frame."""
+                 match_options: MatchOptions | None, morph_options: MorphOptions,
+                 normal: bool = False) -> Morph:
+    """One frame's morph: pairs (nearest, along the normals onto the observed contour,
+    or modal with ``match_options``), then :func:`modalmorph.morph`; errors name the
+    frame."""
     try:
-        pairs = (_nearest_pairs_per_contour(source, target)
-                 if match_options is None else match(source, target, options=match_options))
+        if normal:  # node i to its own point on the observed polyline
+            target = source.with_points(_along_normals(source, target))
+            pairs = np.repeat(np.arange(source.m)[:, None], 2, axis=1)
+        else:
+            pairs = (_nearest_pairs_per_contour(source, target) if match_options is None
+                     else match(source, target, options=match_options))
         return morph(source, target, matching=pairs, options=morph_options)
     except (ValueError, MorphDivergedError) as exc:
         raise ValueError(f"frame {f} ({names[f]}): {exc}") from exc
@@ -374,6 +381,48 @@ def _nearest_pairs(current: np.ndarray, observed: np.ndarray) -> np.ndarray:
     first = np.r_[True, j[order][1:] != j[order][:-1]]
     keep = np.sort(order[first])
     return np.c_[keep, j[keep]]
+
+
+def _check_normal(first: Shape, correspondence: str) -> None:
+    if correspondence == "normal" and not (first.dim == 2 and first.ordered
+                                           and first.faces is None):
+        raise OptionError("correspondence='normal' needs 2D contours (ordered nodes): "
+                          "use 'nearest' or 'modal' for point sets and surfaces")
+
+
+def _along_normals(source: Shape, target: Shape) -> np.ndarray:
+    """Where the normal line of each node of ``source`` (2D contours) meets the partner
+    contour of ``target`` (its polyline): the crossing nearest the node, either side;
+    a node whose line misses it goes to its closest point on the polyline."""
+    out = np.empty_like(source.points)
+    for a, b in zip(source.slices, target.slices, strict=True):
+        out[a] = _cast(source.points[a], target.points[b], source.closed, target.closed)
+    return out
+
+
+def _cast(p: np.ndarray, q: np.ndarray, closed: bool, closed_q: bool) -> np.ndarray:
+    """:func:`_along_normals` of one contour ``p`` (m, 2) onto a polyline ``q``."""
+    tangent = (np.roll(p, -1, axis=0) - np.roll(p, 1, axis=0)) if closed else \
+        np.gradient(p, axis=0)
+    n = np.c_[tangent[:, 1], -tangent[:, 0]]
+    n /= np.maximum(np.linalg.norm(n, axis=1), np.finfo(float).tiny)[:, None]
+    start, e = (q, np.roll(q, -1, axis=0) - q) if closed_q else (q[:-1], np.diff(q, axis=0))
+    w = start[None] - p[:, None]  # p_i + s n_i = start_j + t e_j by Cramer's rule
+    det = e[None, :, 0] * n[:, None, 1] - n[:, None, 0] * e[None, :, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (e[None, :, 0] * w[..., 1] - w[..., 0] * e[None, :, 1]) / det
+        t = (n[:, None, 0] * w[..., 1] - n[:, None, 1] * w[..., 0]) / det
+    s = np.where((t >= 0) & (t < 1) & np.isfinite(s), s, np.inf)
+    j = np.argmin(np.abs(s), axis=1)
+    rows = np.arange(len(p))
+    hit = p + np.nan_to_num(s[rows, j], posinf=0.0)[:, None] * n
+    miss = ~np.isfinite(s[rows, j])
+    if miss.any():  # parallel to every stretch, or beyond an open end
+        seg = start[None] + np.clip(np.einsum("ijk,jk->ij", p[miss, None] - start[None], e)
+                                    / np.einsum("jk,jk->j", e, e), 0, 1)[..., None] * e
+        near = np.argmin(np.linalg.norm(seg - p[miss, None], axis=2), axis=1)
+        hit[miss] = seg[np.arange(miss.sum()), near]
+    return hit
 
 
 def _check_segments(first: Shape, name: str, opts: TrackOptions) -> None:
