@@ -226,3 +226,30 @@ def test_options_objects_same_as_dicts(hearts):
     assert by_object.params == by_dict.params
     assert by_object.params["match_options"]["method"] == "global"
     assert all(m.options == MorphOptions(k=60, max_steps=20) for m in by_object.morphs)
+
+
+def test_normal_correspondence_moves_nodes_along_frame_0_normals():
+    # an ellipse whose wall moves inward along its own normals, unevenly round it: with
+    # correspondence="normal" node i stays on the normal line of node i in frame 0 (a
+    # contour shows no motion along itself); nearest pairs slide along the wall
+    th = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    x0 = np.c_[30 * np.cos(th), 20 * np.sin(th)]
+    t = np.roll(x0, -1, axis=0) - np.roll(x0, 1, axis=0)
+    n = np.c_[t[:, 1], -t[:, 0]] / np.linalg.norm(t, axis=1)[:, None]  # outward
+    dense = np.linspace(0, 2 * np.pi, 1200, endpoint=False)
+    xd = np.c_[30 * np.cos(dense), 20 * np.sin(dense)]
+    td = np.roll(xd, -1, axis=0) - np.roll(xd, 1, axis=0)
+    nd = np.c_[td[:, 1], -td[:, 0]] / np.linalg.norm(td, axis=1)[:, None]
+    depth = [0.0, 2.0, 4.0, 6.0]  # inward offset, times (1 + 0.8 cos theta)
+    frames = [x0] + [xd - d * (1 + 0.8 * np.cos(dense))[:, None] * nd for d in depth[1:]]
+    truth = np.array([x0 - d * (1 + 0.8 * np.cos(th))[:, None] * n for d in depth])
+    error = {c: np.linalg.norm(track(frames, reference="first", correspondence=c,
+                                     morph_options={"tol": 0.001}).points - truth,
+                               axis=2).max() for c in ("normal", "nearest")}
+    assert error["normal"] < 0.1 < error["nearest"]  # units; the ellipse is 60 x 40
+
+
+def test_normal_correspondence_needs_contours():
+    cloud = np.random.default_rng(0).normal(size=(30, 3))
+    with pytest.raises(ValueError, match="normal"):
+        track([cloud, cloud + 0.1], correspondence="normal")

@@ -40,6 +40,12 @@ __all__ = ["REFERENCES", "CORRESPONDENCES", "Track", "TrackOptions", "track",
 
 log = logging.getLogger(__name__)
 
+# correspondence="normal": a node's normal line is followed to the observed contour only
+# up to this many times the distance to the contour's closest point (or the node
+# spacing): lines more oblique than 60 degrees to the contour, or ones that meet a far
+# part of it, take the closest point instead.
+NORMAL_REACH = 2.0
+
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -229,10 +235,11 @@ def _morph_frame(source: Shape, target: Shape, f: int, *, names: tuple,
     or modal with ``match_options``), then :func:`modalmorph.morph`; errors name the
     frame."""
     try:
-        if normal:  # node i to its own point on the observed polyline
-            target = source.with_points(_along_normals(source, target))
+        cast = _along_normals(source, target) if normal else None
+        if cast is not None and not len(crossing_segments(cast, edges=source.edges)):
+            target = source.with_points(cast)  # node i to its own point on the polyline
             pairs = np.repeat(np.arange(source.m)[:, None], 2, axis=1)
-        else:
+        else:  # (normal lines that cross before the contour: nearest pairs this frame)
             pairs = (_nearest_pairs_per_contour(source, target) if match_options is None
                      else match(source, target, options=match_options))
         return morph(source, target, matching=pairs, options=morph_options)
@@ -393,7 +400,9 @@ def _check_normal(first: Shape, correspondence: str) -> None:
 def _along_normals(source: Shape, target: Shape) -> np.ndarray:
     """Where the normal line of each node of ``source`` (2D contours) meets the partner
     contour of ``target`` (its polyline): the crossing nearest the node, either side;
-    a node whose line misses it goes to its closest point on the polyline."""
+    a node whose line misses it, or meets it more than :data:`NORMAL_REACH` times
+    farther than the polyline's closest point (or node spacing), goes to that closest
+    point."""
     out = np.empty_like(source.points)
     for a, b in zip(source.slices, target.slices, strict=True):
         out[a] = _cast(source.points[a], target.points[b], source.closed, target.closed)
@@ -413,16 +422,15 @@ def _cast(p: np.ndarray, q: np.ndarray, closed: bool, closed_q: bool) -> np.ndar
         s = (e[None, :, 0] * w[..., 1] - w[..., 0] * e[None, :, 1]) / det
         t = (n[:, None, 0] * w[..., 1] - n[:, None, 1] * w[..., 0]) / det
     s = np.where((t >= 0) & (t < 1) & np.isfinite(s), s, np.inf)
-    j = np.argmin(np.abs(s), axis=1)
     rows = np.arange(len(p))
-    hit = p + np.nan_to_num(s[rows, j], posinf=0.0)[:, None] * n
-    miss = ~np.isfinite(s[rows, j])
-    if miss.any():  # parallel to every stretch, or beyond an open end
-        seg = start[None] + np.clip(np.einsum("ijk,jk->ij", p[miss, None] - start[None], e)
-                                    / np.einsum("jk,jk->j", e, e), 0, 1)[..., None] * e
-        near = np.argmin(np.linalg.norm(seg - p[miss, None], axis=2), axis=1)
-        hit[miss] = seg[np.arange(miss.sum()), near]
-    return hit
+    s = s[rows, np.argmin(np.abs(s), axis=1)]
+    foot = start[None] + np.clip(np.einsum("ijk,jk->ij", p[:, None] - start[None], e)
+                                 / np.einsum("jk,jk->j", e, e), 0, 1)[..., None] * e
+    gap = np.linalg.norm(foot - p[:, None], axis=2)
+    near = foot[rows, np.argmin(gap, axis=1)]
+    spacing = np.linalg.norm(np.diff(p, axis=0), axis=1).mean()
+    ok = np.abs(s) <= NORMAL_REACH * np.maximum(gap.min(axis=1), spacing)
+    return np.where(ok[:, None], p + np.where(ok, s, 0.0)[:, None] * n, near)
 
 
 def _check_segments(first: Shape, name: str, opts: TrackOptions) -> None:
