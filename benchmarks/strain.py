@@ -156,15 +156,20 @@ def hearts() -> None:
         for number, path in files:
             blocks.setdefault((number - 1) // 20, []).append(path)
         pairs += [b for b in blocks.values() if len(b) == 2]
-    print("\nhearts (endocardium only): global endocardial circumferential strain ED -> ES")
+    print("\nhearts (endocardium only): global endocardial circumferential strain ED -> ES "
+          "(the contours' perimeter ratio as a check; whether the tracked ES crosses itself)")
     for paths in pairs:
         shapes = [np.loadtxt(p, delimiter=",", skiprows=1) for p in paths]
         area = [abs(_area(s)) for s in shapes]
         if area[1] > area[0]:
             shapes, paths = shapes[::-1], paths[::-1]
         got = strain(shapes, endo_only=True)
+        perimeter = [np.linalg.norm(np.roll(s, -1, axis=0) - s, axis=1).sum()
+                     for s in shapes]
         print(f"  {paths[0].stem} -> {paths[1].stem}: "
-              f"{got.circumferential_endo[1, 0]:+.1f} %")
+              f"{got.circumferential_endo[1, 0]:+.1f} % (perimeters "
+              f"{100 * (perimeter[1] / perimeter[0] - 1):+.1f} %"
+              f"{', crossed' if got.tracks[0].crossed.any() else ''})")
 
 
 def _area(p) -> float:
