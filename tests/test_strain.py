@@ -251,3 +251,17 @@ def test_cli_rv_point(tmp_path, phantom):
                  "--no-figures", "--rv-point", f"{c[0] - 30},{c[1]}"]) == 0
     record = json.loads((tmp_path / "o" / "strain.json").read_text())
     assert record["reference_angle"] == pytest.approx(120.0, abs=1.0)
+
+
+def test_phantom_segmented_boundaries_lie_on_the_noisy_masks():
+    ph = ring_phantom(FRAMES, noise=0.5, sector=(60.0, 120.0, 0.0), twist=10.0)
+    clean = ring_phantom(FRAMES, sector=(60.0, 120.0, 0.0), twist=10.0)
+    for k, radius in enumerate((ph.inner, ph.outer)):
+        ref = _circle(ph.centre, radius, 200)
+        assert_allclose(clean.segmented(ref, 3, k), clean.move(ref, 3), atol=1e-12)
+        p = ph.segmented(ref, 3, k)
+        ray = (p - ph.centre) / np.linalg.norm(p - ph.centre, axis=1)[:, None]
+        sign = 1 if k else -1  # into the wall: inward from the epicardium
+        for step, inside in ((-1.0, True), (1.0, False)):  # a pixel is 0.71 px from its centre
+            q = np.rint(p + sign * step * ray).astype(int)
+            assert (ph.masks[3][q[:, 1], q[:, 0]] == inside).all()
