@@ -6,8 +6,8 @@ gives, per segment (0 = global), the truth at end-systole (the strain definition
 to the exact material motion), modalmorph's (:func:`modalmorph.strain`) and the baseline's
 (nearest-point tracking: each node moves to the nearest point of the next frame's
 contour), then the largest error of each over all frames, in percentage points, and the
-errors of an exact tracking of the noisy boundaries (the floor set by the segmentation
-noise), of one ring track, and of the strain with nearest pairs (before the normal
+errors of an exact tracking of the noisy boundaries (what the segmentation noise alone
+leaves: the floor), of one ring track, and of the strain with nearest pairs (before the normal
 correspondence). Then the time of one 30-frame sequence, and the endocardial
 circumferential strain ED -> ES of the shared hearts (``--endo-only``).
 
@@ -58,7 +58,7 @@ def truth(ph) -> dict:
 def floor(ph) -> dict:
     """The same of an exact tracking of the noisy boundaries (the material points of the
     truth moved off by the boundary noise along their ray), smoothed over time as
-    strain() does: what no tracking of these masks can beat."""
+    strain() does: the error the segmentation noise (and the smoothing) alone leave."""
     f = range(len(ph.masks))
     walls = [np.array([ph.segmented(c, i, k) for i in f]) for k, c in enumerate(_circles(ph))]
     sigma = StrainOptions().smooth_frames
@@ -128,7 +128,7 @@ def table(noise: float) -> None:
                   f"{eb[0]:.2f}), worst segment {em[1:].max():.2f} (baseline "
                   f"{eb[1:].max():.2f}); at the reference {np.abs(m[0]).max():.2g}")
             ef = np.abs(best[kind] - t).max(axis=0)
-            print(f"{'':<20} {kind[:6]:<6} floor (exact tracking of these boundaries, "
+            print(f"{'':<20} {kind[:6]:<6} floor (exact tracking of the noisy boundaries, "
                   f"smoothed alike): global {ef[0]:.2f}, worst segment {ef[1:].max():.2f}")
             er = np.abs(ring[kind] - t).max(axis=0)
             print(f"{'':<20} {kind[:6]:<6} one ring track instead: global {er[0]:.2f}, "
