@@ -270,7 +270,7 @@ def test_normal_correspondence_needs_contours():
 
 def test_along_normals_keeps_the_nodes_in_order():
     # a peanut shrinking to a small circle: the normal lines of its concave waists cross
-    # before they reach the circle (without the repair a node went back 0.66 rad)
+    # before they reach the circle (without the repair a node went back 0.54 rad)
     th = np.linspace(0, 2 * np.pi, 64, endpoint=False)
     r = 30 * (1 - 0.4 * np.cos(2 * th))
     small = np.linspace(0, 2 * np.pi, 400, endpoint=False)
