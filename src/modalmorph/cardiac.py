@@ -75,7 +75,8 @@ MIN_HOLE_PIXELS = 9  # a hole smaller than a 3 x 3 block is a speck, not a ventr
 # 30-frame ring phantoms (128 x 128, LV 60 px, no noise) the largest error of the global
 # radial strain falls from 1.54 to 0.86 points (benchmarks/strain.py).
 SMOOTH = 1.0
-# Observed contours are this many times denser than the tracked ones: the nearest-node
+# Observed contours are this many times denser than the tracked ones (correspondence
+# "nearest"; "normal" meets their polyline between nodes): the nearest-node
 # pairs then no longer snap nodes along the curve (endocardial nodes drifted 2.2 degrees
 # rms at 1x); on the same phantoms the worst segment's circumferential error 12.8 -> 3.9.
 DENSE = 4
@@ -87,7 +88,10 @@ TRACK_REFERENCE = "first"
 # goes to where the reference contour's normal meets the frame's contour. A contour shows
 # no motion along itself, and "nearest" pairs slide towards a sector that moves less (up
 # to 10.5 degrees in the akinetic phantom): worst segment circumferential error on the
-# noiseless phantoms 1.6/8.3/4.0 -> 0.5/1.2/0.5 points (contract/akinetic/hypokinetic).
+# noiseless phantoms 1.6/8.3/4.0 -> 0.5/1.2/0.5 points (contract/akinetic/hypokinetic);
+# with the smoothing below 0.6/0.8/0.6, and with 0.2 px boundary noise 1.3/1.7/0.9 (nearest
+# pairs: 2.5/8.9/4.2; benchmarks/strain.py). The phantoms' reference walls are circles,
+# whose normals are their radii: they cannot tell this rule from a radial motion.
 # The morph's stop tolerance (MorphOptions.tol, a fraction of the RMS radius) for the
 # strain: the default 0.005 leaves the nodes up to 0.09 px short of their partners, 0.9
 # points of radial strain on a 10 px wall (global radial error 1.42 -> 0.71 on the
@@ -99,8 +103,8 @@ MORPH_TOL = 0.001
 # (there it would pull the last frame towards the reference). On the noiseless phantoms
 # sigma = 1 frame takes the worst segment radial error 2.0/1.8/2.6 -> 1.2/1.0/1.6 points
 # (contract/akinetic/hypokinetic; pixelation jitter from frame to frame), with 0.2 px
-# boundary noise 8.6/8.7/7.7 -> 4.2/6.0/4.1; sigma 0.7 removes less, 1.5 biases the peaks
-# (global circumferential error 0.2 -> 0.5, measured with the reference kept unsmoothed).
+# boundary noise 8.6/8.7/7.7 -> 4.2/6.0/4.1; sigma 0.7 removes less (5.0/6.5/4.8), 1.5
+# and 2 bias the peaks (noiseless global circumferential error 0.2 -> 0.6 -> 1.1).
 SMOOTH_MIN_FRAMES = 10
 
 
