@@ -68,6 +68,11 @@ DEFINITIONS = {
     "strain_rate": "central differences of the strain over frames (per frame, or per "
                    "second given frame_interval)",
     "peak": "the value of largest magnitude over the frames, and its frame",
+    "tracking": "every frame reached from the first frame by a morph; by default "
+                "(correspondence normal) each node paired with the point where the "
+                "contour's normal meets the frame's contour, as a contour shows no motion "
+                "along itself; the node paths smoothed over time (smooth_frames, cines of "
+                "10 frames or more)",
 }
 CONTOUR_FILES = (".csv", ".tsv", ".txt", ".json", ".svg")  # read as contours, not masks
 MIN_HOLE_PIXELS = 9  # a hole smaller than a 3 x 3 block is a speck, not a ventricle
