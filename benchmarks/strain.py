@@ -5,9 +5,11 @@ px across, an incompressible wall contracting 30 % of its endocardial radius) th
 gives, per segment (0 = global), the truth at end-systole (the strain definitions applied
 to the exact material motion), modalmorph's (:func:`modalmorph.strain`) and the baseline's
 (nearest-point tracking: each node moves to the nearest point of the next frame's
-contour), then the largest error of each over all frames, in percentage points. Then the
-time of one 30-frame sequence, and the endocardial circumferential strain ED -> ES of the
-shared hearts (``--endo-only``).
+contour), then the largest error of each over all frames, in percentage points, and the
+errors of an exact tracking of the noisy boundaries (what the segmentation noise alone
+leaves: the floor), of one ring track, and of the strain with nearest pairs (before the normal
+correspondence). Then the time of one 30-frame sequence, and the endocardial
+circumferential strain ED -> ES of the shared hearts (``--endo-only``).
 
 Run: ``OMP_NUM_THREADS=1 PYTHONPATH=src python benchmarks/strain.py [--noise 0.2]``
 """
@@ -19,11 +21,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy.ndimage import gaussian_filter1d
 from scipy.spatial import cKDTree
 
 from modalmorph import Shape, TrackOptions, track
 from modalmorph.cardiac import (
     DENSE,
+    MORPH_TOL,
+    SMOOTH_MIN_FRAMES,
     TRACK_REFERENCE,
     StrainOptions,
     mask_ring,
@@ -46,13 +51,28 @@ HEARTS = Path("/work/shared/data/heart")
 
 def truth(ph) -> dict:
     """The strain definitions applied to the exact material motion."""
+    f = range(len(ph.masks))
+    return wall_strain(*[np.array([ph.move(c, i) for i in f]) for c in _circles(ph)])
+
+
+def floor(ph) -> dict:
+    """The same of an exact tracking of the noisy boundaries (the material points of the
+    truth moved off by the boundary noise along their ray), smoothed over time as
+    strain() does: the error the segmentation noise (and the smoothing) alone leave."""
+    f = range(len(ph.masks))
+    walls = [np.array([ph.segmented(c, i, k) for i in f]) for k, c in enumerate(_circles(ph))]
+    sigma = StrainOptions().smooth_frames
+    if sigma and len(ph.masks) >= SMOOTH_MIN_FRAMES:
+        walls = [gaussian_filter1d(w, sigma, axis=0, mode="nearest") for w in walls]
+    return wall_strain(*walls)
+
+
+def _circles(ph):
+    """Dense material points of the endocardium and epicardium at the reference."""
     def circle(radius, n):
         th = np.linspace(0, 2 * np.pi, n, endpoint=False)
         return ph.centre + radius * np.c_[np.cos(th), -np.sin(th)]
-    endo, epi = circle(ph.inner, TRUTH_NODES[0]), circle(ph.outer, TRUTH_NODES[1])
-    f = range(len(ph.masks))
-    return wall_strain(np.array([ph.move(endo, i) for i in f]),
-                       np.array([ph.move(epi, i) for i in f]))
+    return circle(ph.inner, TRUTH_NODES[0]), circle(ph.outer, TRUTH_NODES[1])
 
 
 def baseline(ph, nodes: int) -> dict:
@@ -73,14 +93,17 @@ def baseline(ph, nodes: int) -> dict:
 
 def ring_track(ph, nodes: int) -> dict:
     """The alternative to strain()'s contour-by-contour tracking: one track of the ring
-    (one FE model over both contours, each matched with its partner), same inputs."""
+    (one FE model over both contours, each matched with its partner), same inputs and
+    options (without the smoothing over time)."""
     rings = [mask_ring(m, f"frame {i}") for i, m in enumerate(ph.masks)]
     shapes = []
     for f, (endo, epi) in enumerate(rings):
         n = nodes if f == 0 else DENSE * nodes
         shapes.append(Shape(np.vstack([resample(epi, n), resample(endo, n)]),
                             contours=(n, n)))
-    points = track(shapes, options=TrackOptions(reference=TRACK_REFERENCE)).points
+    options = TrackOptions(reference=TRACK_REFERENCE,
+                           correspondence=StrainOptions().correspondence)
+    points = track(shapes, options=options, morph_options=dict(tol=MORPH_TOL)).points
     return wall_strain(points[:, nodes:], points[:, :nodes])
 
 
@@ -91,8 +114,10 @@ def table(noise: float) -> None:
           f"{'err mm':>7} {'err base':>8}")
     for name, kw in PHANTOMS.items():
         ph = ring_phantom(FRAMES, noise=noise, **kw)
-        tr, base = truth(ph), baseline(ph, StrainOptions().nodes)
+        tr, base, best = truth(ph), baseline(ph, StrainOptions().nodes), floor(ph)
         got, ring = strain(ph.masks), ring_track(ph, StrainOptions().nodes)
+        before = strain(ph.masks, correspondence="nearest", smooth_frames=0.0,
+                        morph_options={})  # the correspondence of track (until 2026-11)
         for kind in ("radial", "circumferential"):
             t, m, b = tr[kind], getattr(got, kind), base[kind]
             em, eb = np.abs(m - t).max(axis=0), np.abs(b - t).max(axis=0)
@@ -102,9 +127,15 @@ def table(noise: float) -> None:
             print(f"{'':<20} {kind[:6]:<6} max error: global {em[0]:.2f} (baseline "
                   f"{eb[0]:.2f}), worst segment {em[1:].max():.2f} (baseline "
                   f"{eb[1:].max():.2f}); at the reference {np.abs(m[0]).max():.2g}")
+            ef = np.abs(best[kind] - t).max(axis=0)
+            print(f"{'':<20} {kind[:6]:<6} floor (exact tracking of the noisy boundaries, "
+                  f"smoothed alike): global {ef[0]:.2f}, worst segment {ef[1:].max():.2f}")
             er = np.abs(ring[kind] - t).max(axis=0)
             print(f"{'':<20} {kind[:6]:<6} one ring track instead: global {er[0]:.2f}, "
                   f"worst segment {er[1:].max():.2f}")
+            eb = np.abs(getattr(before, kind) - t).max(axis=0)
+            print(f"{'':<20} {kind[:6]:<6} nearest pairs, no smoothing, morph tol 0.005: "
+                  f"global {eb[0]:.2f}, worst segment {eb[1:].max():.2f}")
         if kw.get("sector"):
             weakest = 1 + int(np.argmin(np.abs(got.peak("circumferential")[0][1:])))
             truest = 1 + int(np.argmin(np.abs(tr["circumferential"][ES, 1:])))
@@ -146,15 +177,20 @@ def hearts() -> None:
         for number, path in files:
             blocks.setdefault((number - 1) // 20, []).append(path)
         pairs += [b for b in blocks.values() if len(b) == 2]
-    print("\nhearts (endocardium only): global endocardial circumferential strain ED -> ES")
+    print("\nhearts (endocardium only): global endocardial circumferential strain ED -> ES "
+          "(the contours' perimeter ratio as a check; whether the tracked ES crosses itself)")
     for paths in pairs:
         shapes = [np.loadtxt(p, delimiter=",", skiprows=1) for p in paths]
         area = [abs(_area(s)) for s in shapes]
         if area[1] > area[0]:
             shapes, paths = shapes[::-1], paths[::-1]
         got = strain(shapes, endo_only=True)
+        perimeter = [np.linalg.norm(np.roll(s, -1, axis=0) - s, axis=1).sum()
+                     for s in shapes]
         print(f"  {paths[0].stem} -> {paths[1].stem}: "
-              f"{got.circumferential_endo[1, 0]:+.1f} %")
+              f"{got.circumferential_endo[1, 0]:+.1f} % (perimeters "
+              f"{100 * (perimeter[1] / perimeter[0] - 1):+.1f} %"
+              f"{', crossed' if got.tracks[0].crossed.any() else ''})")
 
 
 def _area(p) -> float:

@@ -93,6 +93,28 @@ def test_segments_are_lagrangian_and_find_an_akinetic_sector():
     assert np.abs(truth["circumferential"][3, 2]) < 5  # the sector barely shortens
 
 
+def test_akinetic_sector_segments_within_the_goal():
+    # the pairs follow the reference wall's normals: no sliding towards the sector that
+    # does not contract (nearest pairs: 7.8 points off in segment 2, 4.4 in segment 1)
+    ph = ring_phantom(FRAMES, sector=(60.0, 120.0, 0.0))
+    truth, got = _truth(ph), mm.strain(ph.masks)
+    for kind in ("radial", "circumferential"):  # measured: 1.44, 1.07 points
+        assert np.abs(getattr(got, kind) - truth[kind]).max() < 2.0
+
+
+def test_smoothing_over_time():
+    ph = ring_phantom(12)
+    raw, smooth = (mm.strain(ph.masks, smooth_frames=s) for s in (0.0, 1.0))
+    assert_allclose(raw.endo, raw.tracks[0].points, atol=1e-12)
+    assert np.abs(smooth.endo - raw.endo).max() > 1e-3  # smoothed, the reference too
+    for kind in KINDS:  # ... and the strain is still 0 there
+        assert_allclose(getattr(smooth, kind)[0], 0.0, atol=1e-9)
+    short = mm.strain(ph.masks[:5])  # under SMOOTH_MIN_FRAMES: as tracked
+    assert_allclose(short.endo, short.tracks[0].points, atol=1e-12)
+    with pytest.raises(OptionError, match="smooth_frames"):
+        mm.StrainOptions(smooth_frames=-1.0)
+
+
 def test_rv_point_and_rv_label_set_segment_one(phantom):
     c = phantom.centre
     got = mm.strain(phantom.masks[:2], rv_point=(c[0] - 30, c[1]))  # RV at 180 degrees
@@ -229,3 +251,17 @@ def test_cli_rv_point(tmp_path, phantom):
                  "--no-figures", "--rv-point", f"{c[0] - 30},{c[1]}"]) == 0
     record = json.loads((tmp_path / "o" / "strain.json").read_text())
     assert record["reference_angle"] == pytest.approx(120.0, abs=1.0)
+
+
+def test_phantom_segmented_boundaries_lie_on_the_noisy_masks():
+    ph = ring_phantom(FRAMES, noise=0.5, sector=(60.0, 120.0, 0.0), twist=10.0)
+    clean = ring_phantom(FRAMES, sector=(60.0, 120.0, 0.0), twist=10.0)
+    for k, radius in enumerate((ph.inner, ph.outer)):
+        ref = _circle(ph.centre, radius, 200)
+        assert_allclose(clean.segmented(ref, 3, k), clean.move(ref, 3), atol=1e-12)
+        p = ph.segmented(ref, 3, k)
+        ray = (p - ph.centre) / np.linalg.norm(p - ph.centre, axis=1)[:, None]
+        sign = 1 if k else -1  # into the wall: inward from the epicardium
+        for step, inside in ((-1.0, True), (1.0, False)):  # a pixel is 0.71 px from its centre
+            q = np.rint(p + sign * step * ray).astype(int)
+            assert (ph.masks[3][q[:, 1], q[:, 0]] == inside).all()

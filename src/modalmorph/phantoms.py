@@ -21,7 +21,7 @@ applied to any reference material points: :meth:`RingPhantom.move`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -53,6 +53,9 @@ class RingPhantom:
         counterclockwise on the image from +x) moving ``kinesis`` times as much, or ().
     blend : float
         Width (degrees) of the transition to the abnormal sector.
+    waves : ndarray, shape (F, 2, 2, NOISE_HARMONICS) or None
+        The boundary noise: per frame, for the endocardium then the epicardium, the
+        amplitudes (pixels) and phases (turns) of its angular harmonics (None: none).
     """
 
     masks: np.ndarray
@@ -63,6 +66,7 @@ class RingPhantom:
     twist: np.ndarray
     sector: tuple = ()
     blend: float = 30.0
+    waves: np.ndarray | None = None
 
     def __repr__(self) -> str:
         n_frames, h, w = self.masks.shape
@@ -78,6 +82,21 @@ class RingPhantom:
         gap = np.abs(np.angle(np.exp(1j * (theta - mid)))) - half  # < 0 inside
         ramp = np.clip(0.5 - gap / np.radians(self.blend), 0.0, 1.0)
         return 1.0 - (1.0 - k) * ramp
+
+    def segmented(self, points: np.ndarray, f: int, boundary: int) -> np.ndarray:
+        """Reference material points of a boundary (0 endocardium, 1 epicardium) moved to
+        frame ``f`` and off by that frame's boundary noise along their ray: where an
+        exact tracking of the noisy masks' boundaries would put them."""
+        moved = self.move(points, f)
+        if self.waves is None:
+            return moved
+        d = np.asarray(points, dtype=float) - self.centre
+        theta = np.arctan2(-d[:, 1], d[:, 0])
+        a, phase = self.waves[f, boundary]
+        k = np.arange(1, len(a) + 1)
+        off = (a * np.cos(np.outer(theta, k) + 2 * np.pi * phase)).sum(axis=1)
+        ray = moved - self.centre
+        return moved + off[:, None] * ray / np.linalg.norm(ray, axis=1)[:, None]
 
     def move(self, points: np.ndarray, f: int) -> np.ndarray:
         """Reference material points (m, 2) of the wall at frame 0, moved to frame ``f``."""
@@ -120,24 +139,28 @@ def ring_phantom(frames: int = 30, *, inner: float = 20.0,
                      inner=float(inner), outer=float(outer), contraction=contraction * t,
                      twist=np.radians(twist) * t, sector=tuple(sector))
     rng = np.random.default_rng(seed)
+    waves = np.array([[_waves(rng, noise) for _ in range(2)] for _ in range(frames)]) \
+        if noise > 0 else None
+    ph = replace(ph, waves=waves)
     rows, cols = np.mgrid[0:size, 0:size]
     d = np.c_[cols.ravel() - centre[0], rows.ravel() - centre[1]]
     r2 = (d ** 2).sum(axis=1)
     angle = np.arctan2(-d[:, 1], d[:, 0])
+    k = np.arange(1, NOISE_HARMONICS + 1)
     for f in range(frames):
         theta = angle - ph.twist[f]  # the reference angle of the material at each pixel
         ri = inner * (1.0 - ph.contraction[f] * ph.kinesis(theta))
-        lo = ri + _wavy(rng, theta, noise)
-        hi = np.sqrt(ri ** 2 + outer ** 2 - inner ** 2) + _wavy(rng, theta, noise)
+        lo, hi = ri, np.sqrt(ri ** 2 + outer ** 2 - inner ** 2)
+        if waves is not None:  # a smooth, wavy edge
+            lo, hi = (r + (a * np.cos(np.outer(theta, k) + 2 * np.pi * phase)).sum(axis=1)
+                      for r, (a, phase) in zip((lo, hi), waves[f], strict=True))
         ph.masks[f] = ((r2 >= lo ** 2) & (r2 <= hi ** 2)).reshape(size, size)
     return ph
 
 
-def _wavy(rng, theta: np.ndarray, noise: float) -> np.ndarray:
-    """A smooth random boundary offset of standard deviation ``noise`` along ``theta``."""
-    if noise <= 0:
-        return 0.0
-    k = np.arange(1, NOISE_HARMONICS + 1)
+def _waves(rng, noise: float) -> np.ndarray:
+    """Amplitudes and phases (2, NOISE_HARMONICS) of a smooth random boundary offset of
+    standard deviation ``noise`` (pixels)."""
     a, phase = rng.normal(size=(2, NOISE_HARMONICS))
     a *= noise * np.sqrt(2.0 / (a ** 2).sum())  # rms of sum a_k cos(.) is |a| / sqrt(2)
-    return (a * np.cos(np.outer(theta, k) + 2 * np.pi * phase)).sum(axis=1)
+    return np.array([a, phase])

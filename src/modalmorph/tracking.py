@@ -24,6 +24,7 @@ from .core.shape import Shape, as_shape
 from .errors import MorphDivergedError, OptionError, ShapeError
 from .matching import match
 from .matching.contours import pair_contours
+from .matching.normals import along_normals
 from .options import (
     CORRESPONDENCES,
     REFERENCES,
@@ -186,8 +187,9 @@ def track(frames, *, options: TrackOptions | None = None,
     morph_opts = _as_options(morph_options, MorphOptions, "morph_options")
     shapes, names = _frames(frames, names, opts.start_node)
     _check_segments(shapes[0], names[0], opts)
+    _check_normal(shapes[0], opts.correspondence)
     step = partial(_morph_frame, names=names, match_options=match_opts,
-                   morph_options=morph_opts)
+                   morph_options=morph_opts, normal=opts.correspondence == "normal")
     first = shapes[0]
     with limit(max(shape.m for shape in shapes)):
         morphs = _follow(shapes, opts.reference, step, progress)
@@ -222,12 +224,20 @@ def _follow(shapes, reference: str, step, progress) -> list:
 
 
 def _morph_frame(source: Shape, target: Shape, f: int, *, names: tuple,
-                 match_options: MatchOptions | None, morph_options: MorphOptions) -> Morph:
-    """One frame's morph: pairs (nearest, or modal with ``match_options``), then
-    :func:`modalmorph.morph`; errors name the frame."""
+                 match_options: MatchOptions | None, morph_options: MorphOptions,
+                 normal: bool = False) -> Morph:
+    """One frame's morph: pairs (nearest, along the normals onto the observed contour,
+    or modal with ``match_options``), then :func:`modalmorph.morph`; errors name the
+    frame."""
     try:
-        pairs = (_nearest_pairs_per_contour(source, target)
-                 if match_options is None else match(source, target, options=match_options))
+        cast = along_normals(source, target) if normal else None
+        if cast is not None and len(np.unique(cast, axis=0)) == len(cast) and \
+                not len(crossing_segments(cast, edges=source.edges)):
+            target = source.with_points(cast)  # node i to its own point on the polyline
+            pairs = np.repeat(np.arange(source.m)[:, None], 2, axis=1)
+        else:  # (normal targets that cross or coincide, open contours: nearest pairs)
+            pairs = (_nearest_pairs_per_contour(source, target) if match_options is None
+                     else match(source, target, options=match_options))
         return morph(source, target, matching=pairs, options=morph_options)
     except (ValueError, MorphDivergedError) as exc:
         raise ValueError(f"frame {f} ({names[f]}): {exc}") from exc
@@ -374,6 +384,13 @@ def _nearest_pairs(current: np.ndarray, observed: np.ndarray) -> np.ndarray:
     first = np.r_[True, j[order][1:] != j[order][:-1]]
     keep = np.sort(order[first])
     return np.c_[keep, j[keep]]
+
+
+def _check_normal(first: Shape, correspondence: str) -> None:
+    if correspondence == "normal" and not (first.dim == 2 and first.ordered
+                                           and first.faces is None):
+        raise OptionError("correspondence='normal' needs 2D contours (ordered nodes): "
+                          "use 'nearest' or 'modal' for point sets and surfaces")
 
 
 def _check_segments(first: Shape, name: str, opts: TrackOptions) -> None:

@@ -26,7 +26,7 @@ OBJECTS = ("largest", "center", "all")  # or a number of the image's objects
 FRAME_SPACINGS = ("time", "path")
 STEP_MESHES = ("none", "ply", "obj")  # OutputOptions.meshes
 REFERENCES = ("previous", "first")
-CORRESPONDENCES = ("nearest", "modal")
+CORRESPONDENCES = ("nearest", "normal", "modal")
 # Ranges beyond which the integration is meaningless or overflows (fuzz suite; method.md §4).
 K_RANGE = (1e-6, 1e6)
 DT_RANGE = (1e-6, 1e6)

@@ -269,7 +269,9 @@ class TrackOptions(Options):
     correspondence: str = option(
         "nearest", "nearest: in the frames' common frame each observed node pulls at most "
         "one node, the nearest of those whose nearest it is (consecutive frames, motions "
-        "under the node spacing); modal: modal matching (large motions between frames)",
+        "under the node spacing); normal: each node to where the normal of its contour "
+        "meets the observed contour (2D contours; no sliding along the wall); modal: "
+        "modal matching (large motions between frames)",
         group="sequence", kind="str", choices=CORRESPONDENCES)
     cycle: bool = option(
         False, "periodic sequence (a cardiac cycle): also morph the last frame back onto "

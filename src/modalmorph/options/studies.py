@@ -57,8 +57,14 @@ class StrainOptions(Options):
         None, "seconds between frames: strain rates per second (default: per frame)",
         group="strain", kind="float")
     correspondence: str = option(
-        "nearest", "how the tracking pairs nodes between frames (as track's)",
+        "normal", "how the tracking pairs nodes between frames (as track's; normal: "
+        "along the reference wall's normals, no sliding along the wall)",
         group="strain", kind="str", choices=CORRESPONDENCES)
+    smooth_frames: float = option(
+        1.0, "Gaussian smoothing of the tracked wall over time, standard deviation in "
+        "frames (segmentation errors are independent frame to frame, the wall's motion is "
+        "smooth); only for sequences of 10 frames or more (a cine); 0 disables",
+        group="strain", kind="float")
 
     def _check(self):
         for name, low in (("segments", 1), ("reference_frame", 0), ("nodes", 8)):
@@ -80,6 +86,9 @@ class StrainOptions(Options):
                 isinstance(self.rv_point, tuple) and len(self.rv_point) == 2
                 and all(map(is_number, self.rv_point))):
             raise OptionError(f"rv_point must be two numbers (x, y), got {self.rv_point!r}")
+        if not (is_number(self.smooth_frames) and self.smooth_frames >= 0):
+            raise OptionError(f"smooth_frames must be a number of frames >= 0, got "
+                              f"{self.smooth_frames!r}")
         if not isinstance(self.endo_only, bool):
             raise OptionError(f"endo_only must be true or false, got {self.endo_only!r}")
 
