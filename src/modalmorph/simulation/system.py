@@ -272,7 +272,9 @@ def damping_matrix(damping, K_mod: np.ndarray, spring: np.ndarray, *,
     else:
         w_lo, w_hi = frequency_range(K_mod)  # (5) through two ratios, as the paper
         a, b = rayleigh(*damping, w_lo, w_hi)
-    return a * np.eye(n) + b * K_mod
+    C = b * K_mod  # a I + b K_mod
+    C.flat[::n + 1] += a
+    return C
 
 
 def frequency_range(K_mod: np.ndarray, *, highest: bool = True):
