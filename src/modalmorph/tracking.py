@@ -148,7 +148,9 @@ def track(frames, *, options: TrackOptions | None = None,
 
     Frame ``f`` is reached by morphing the tracked frame ``f - 1`` (or frame 0) onto the
     observed frame ``f`` (:func:`modalmorph.morph`): node ``i`` keeps its identity and
-    every frame is fitted to its own data (no drift away from the contours).
+    every frame is fitted to its own data (no drift away from the contours). With
+    ``reference="first"`` frame 0's model, modes and integrator are built once for every
+    frame (:func:`modalmorph.simulation.reuse_systems`).
 
     Parameters
     ----------
