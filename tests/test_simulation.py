@@ -97,3 +97,27 @@ def test_state_is_small_and_the_stop_test_chosen_once(kind, stop, rng):
     assert len(vars(sim)) <= 12, sorted(vars(sim))
     assert type(sim.stop) is stop
     assert sim.result().steps == sim.steps == len(sim.history.shapes) - 1
+
+
+def test_reuse_systems_same_numbers_and_released():
+    """Inside reuse_systems, a second build on the same Shape with equal options reuses the
+    model, modes and integrator, and its morph equals a fresh one bit for bit; another
+    source or other options build their own; nothing is kept after the block."""
+    from modalmorph.simulation import reuse_systems
+    from modalmorph.simulation.system import ModalSystem
+
+    a, b, pairs = _ellipses()
+    c = Shape(b.points * [0.9, 1.1])
+    options = MorphOptions()
+    fresh = Simulation(a, c, pairs, options).run().result()
+    with reuse_systems():
+        first = ModalSystem.build(a, b, pairs, options)
+        again = Simulation(a, c, pairs, options)
+        other = ModalSystem.build(Shape(a.points), b, pairs, options)
+        softer = ModalSystem.build(a, b, pairs, options.replace(k=0.5))
+        assert again.system.model is first.model and again.system.newmark is first.newmark
+        assert other.model is not first.model and softer.newmark is not first.newmark
+        reused = again.run().result()
+    for name in ("shapes", "loads", "energy", "node_energy", "mean_distance"):
+        assert_array_equal(getattr(reused, name), getattr(fresh, name))
+    assert ModalSystem.build(a, b, pairs, options).model is not first.model

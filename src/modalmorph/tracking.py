@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
+from contextlib import nullcontext
 from dataclasses import asdict, dataclass, field
 from functools import partial
 
@@ -34,6 +35,7 @@ from .options import (
     parameters,
 )
 from .pipeline import Morph, morph
+from .simulation import reuse_systems
 from .threads import limit
 
 __all__ = ["REFERENCES", "CORRESPONDENCES", "Track", "track",
@@ -147,7 +149,9 @@ def track(frames, *, options: TrackOptions | None = None,
 
     Frame ``f`` is reached by morphing the tracked frame ``f - 1`` (or frame 0) onto the
     observed frame ``f`` (:func:`modalmorph.morph`): node ``i`` keeps its identity and
-    every frame is fitted to its own data (no drift away from the contours).
+    every frame is fitted to its own data (no drift away from the contours). With
+    ``reference="first"`` frame 0's model, modes and integrator are built once for every
+    frame (:func:`modalmorph.simulation.reuse_systems`).
 
     Parameters
     ----------
@@ -191,7 +195,9 @@ def track(frames, *, options: TrackOptions | None = None,
     step = partial(_morph_frame, names=names, match_options=match_opts,
                    morph_options=morph_opts, normal=opts.correspondence == "normal")
     first = shapes[0]
-    with limit(max(shape.m for shape in shapes)):
+    # reference "first": every frame's morph starts from frame 0's model and integrator
+    reuse = reuse_systems() if opts.reference == "first" else nullcontext()
+    with limit(max(shape.m for shape in shapes)), reuse:
         morphs = _follow(shapes, opts.reference, step, progress)
         points = np.array([first.points, *[r.shapes[-1] for r in morphs]])
         closure = step(first.with_points(points[-1]), first, 0) if opts.cycle else None

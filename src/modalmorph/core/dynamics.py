@@ -237,7 +237,7 @@ class LoadTargets:
         length from ``a`` to ``c``. Returns the nodes and their targets (b, d)."""
         m, n = len(self.source), len(self.target)
         nodes = nodes[np.argsort((nodes - a) % m)]  # in order from a (cyclic)
-        t = _fractions(self.source[np.r_[a, nodes, c]])[1:-1]
+        t = _fractions(self.source[np.concatenate(([a], nodes, [c]))])[1:-1]
         a2, c2 = self.partner[a], self.partner[c]
         if target_closed:
             fwd, bwd = (c2 - a2) % n, (a2 - c2) % n
@@ -358,7 +358,7 @@ class ContourLoads:
 def _fractions(path: np.ndarray) -> np.ndarray:
     """Cumulative arc length along a polyline (k, d) as a fraction of its length, (k,)
     (evenly spaced when the polyline has no length)."""
-    cum = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))]
+    cum = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))))
     return cum / cum[-1] if cum[-1] > 0 else np.linspace(0.0, 1.0, len(path))
 
 
@@ -424,7 +424,9 @@ class Newmark:
         a2, a3 = 1 / (al * dt), 1 / (2 * al) - 1
         a4, a5 = de / al - 1, dt / 2 * (de / al - 2)
         object.__setattr__(self, "coefficients", (a0, a1, a2, a3, a4, a5))
-        K_eff = self.K + a0 * np.eye(n) + a1 * self.C  # left side of (15)
+        K_eff = self.K.copy()  # left side of (15), K + a0 I + a1 C, in that order
+        K_eff.flat[::n + 1] += a0
+        K_eff += a1 * self.C
         # K_eff is SPD and well conditioned (a0 I dominates for small steps): its inverse,
         # formed once, turns every step's solve into one matrix-vector product
         L, info = lapack.dpotrf(K_eff, lower=1)
@@ -433,7 +435,10 @@ class Newmark:
         if info != 0:
             raise ValueError("Newmark's effective stiffness is not positive definite: "
                              "check the damping and the time step")
-        object.__setattr__(self, "inverse", np.tril(inv) + np.tril(inv, -1).T)
+        lower = np.tril(inv)
+        full = lower + lower.T  # the diagonal twice: set it back
+        full.flat[::n + 1] = lower.flat[::n + 1]
+        object.__setattr__(self, "inverse", full)
 
     def step(self, x, v, a, f):
         """One step: state (x, v, a) at t and load f at t + dt -> state at t + dt."""

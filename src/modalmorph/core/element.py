@@ -25,7 +25,7 @@ from .shape import as_shape
 
 __all__ = ["DEFAULT_SIGMA", "AUTO_CONDITION", "MAX_CONDITION", "MIN_SIGMA", "MAX_SIGMA",
            "DEFAULT_CUTOFF", "AUTO_DENSE_MAX_DOF", "auto_sigma", "check_sigma",
-           "cutoff_radius", "gaussian", "gram_entries", "stiffness_entries",
+           "cutoff_radius", "gaussian", "gram_entries", "squared_norms", "stiffness_entries",
            "stiffness_components", "stiffness_component_pairs", "self_entries",
            "gaussian_from_overlap",
            "auto_sigma_condition", "singular_gram"]
@@ -72,12 +72,20 @@ def gaussian_from_overlap(gamma: np.ndarray, sigma: float, d: int) -> np.ndarray
     return np.square(gamma / _volume(sigma, d))
 
 
-def gram_entries(r: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
-    """Entries of ``G`` (1)-(2) and ``Gamma`` for node offsets ``r`` (..., d).
+def squared_norms(r: np.ndarray) -> np.ndarray:
+    """``|r|^2`` of offsets ``r`` (..., d), shape ``r.shape[:-1]`` (the ``r2`` that
+    :func:`gram_entries` and :func:`stiffness_entries` accept to share it)."""
+    return _squared_norm(r)
+
+
+def gram_entries(r: np.ndarray, sigma: float, r2: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Entries of ``G`` (1)-(2) and ``Gamma`` for node offsets ``r`` (..., d); ``r2``:
+    their :func:`squared_norms` when already computed.
 
     Returns ``(g, gamma)``, each of shape ``r.shape[:-1]``.
     """
-    r2 = _squared_norm(r)
+    r2 = _squared_norm(r) if r2 is None else r2
     return gaussian(r2, sigma), _overlap(r2, sigma, r.shape[-1])
 
 
@@ -103,7 +111,9 @@ def stiffness_components(r: np.ndarray, sigma: float, lam: float, mu: float,
     return _stiffness(r, sigma, lam, mu, stiffness_component_pairs(r.shape[-1]))
 
 
-def stiffness_entries(r: np.ndarray, sigma: float, lam: float, mu: float) -> np.ndarray:
+def stiffness_entries(r: np.ndarray, sigma: float, lam: float, mu: float, *,
+                      r2: np.ndarray | None = None, gamma: np.ndarray | None = None
+                      ) -> np.ndarray:
     """Blocks of the stiffness in the Gaussian basis, ``K_g[..., a, b]``, for offsets ``r``.
 
     ``K_g^ab = (lambda + mu) D^ab + mu delta_ab sum_c D^cc``
@@ -111,11 +121,14 @@ def stiffness_entries(r: np.ndarray, sigma: float, lam: float, mu: float) -> np.
     ``t = (lambda + mu) sigma^2 / 2 + mu (d sigma^2 / 2 - |r|^2 / 4)``, shape
     ``r.shape + (d,)``: a view of a (d, d) + ``r.shape[:-1]`` array, one contiguous block
     per component (faster to fill, and to lay out component-major (7), than d x d blocks).
+    ``r2`` and ``gamma``: :func:`squared_norms` of ``r`` and ``Gamma`` there
+    (:func:`gram_entries`) when already computed (the same numbers, not computed twice).
     """
     d = r.shape[-1]
     pairs = [(a, b) for a in range(d) for b in range(d)]
     out = np.empty((d, d) + r.shape[:-1])
-    for (a, b), v in zip(pairs, _stiffness(r, sigma, lam, mu, pairs)[0], strict=True):
+    blocks = _stiffness(r, sigma, lam, mu, pairs, r2, gamma)[0]
+    for (a, b), v in zip(pairs, blocks, strict=True):
         out[a, b] = v
     return np.moveaxis(out, (0, 1), (-2, -1))
 
@@ -130,7 +143,8 @@ def self_entries(sigma: float, d: int, lam: float, mu: float) -> tuple[float, fl
 
 
 def _stiffness(r: np.ndarray, sigma: float, lam: float, mu: float,
-               pairs: list[tuple[int, int]]) -> tuple[list[np.ndarray], np.ndarray]:
+               pairs: list[tuple[int, int]], r2: np.ndarray | None = None,
+               gamma: np.ndarray | None = None) -> tuple[list[np.ndarray], np.ndarray]:
     """``[K_g^ab for (a, b) in pairs]`` and ``Gamma`` for offsets ``r`` (..., d).
 
     Every ``(a, b)`` is evaluated as written, ``(-(lambda + mu) / 4 r_a) r_b``: ``K^ab``
@@ -138,8 +152,8 @@ def _stiffness(r: np.ndarray, sigma: float, lam: float, mu: float,
     iterations would carry a change of that bit to 1e-9 in its frequencies).
     """
     d = r.shape[-1]
-    r2 = _squared_norm(r)
-    gamma = _overlap(r2, sigma, d)
+    r2 = _squared_norm(r) if r2 is None else r2
+    gamma = _overlap(r2, sigma, d) if gamma is None else gamma
     scale = gamma / sigma**4
     diag = (lam + mu) * sigma**2 / 2 + mu * (d * sigma**2 / 2 - r2 / 4)
     del r2

@@ -29,6 +29,7 @@ from .element import (
     gaussian,
     gram_entries,
     singular_gram,
+    squared_norms,
     stiffness_entries,
 )
 from .material import POLYETHYLENE, Material
@@ -237,16 +238,21 @@ class FEModel:
         return x[None, :, :] - x[:, None, :]  # r_ij = X_j - X_i
 
     @cached_property
+    def _r2(self) -> np.ndarray:
+        return squared_norms(self._offsets)  # |r_ij|^2, shared by G, Gamma and K_g
+
+    @cached_property
     def gram(self) -> tuple[np.ndarray, np.ndarray]:
         """Dense ``(G, Gamma)`` of the exact model, each (m, m)."""
-        return gram_entries(self._offsets, self.width)
+        return gram_entries(self._offsets, self.width, self._r2)
 
     @cached_property
     def stiffness_gaussian(self) -> np.ndarray:
         """Dense stiffness in the Gaussian basis, ``K_g`` (dm, dm), component-major (7)."""
         self._check_dense("K_g")
         lam, mu = self.lame
-        blocks = stiffness_entries(self._offsets, self.width, lam, mu)  # (m, m, d, d)
+        blocks = stiffness_entries(self._offsets, self.width, lam, mu, r2=self._r2,
+                                   gamma=self.gram[1])  # (m, m, d, d)
         dm = self.dim * self.m
         return np.ascontiguousarray(blocks.transpose(2, 0, 3, 1).reshape(dm, dm))
 

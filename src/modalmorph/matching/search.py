@@ -63,22 +63,25 @@ def _forward(C: np.ndarray, skip: float, repeat: float, keep: bool):
         F[1:, ..., 0] = (skip * np.arange(1, m + 1)).reshape(m, *[1] * len(batch))
     repeats = np.isfinite(repeat)
     prev = np.empty((*batch, n))
-    rows = np.moveaxis(C, -2, 0)
-    heads, tails = F[..., :-1], F[..., 1:]  # F[i, ..., j] and F[i, ..., 1 + j]
+    # per-row views made once (lists index faster than arrays make views)
+    rows = list(np.moveaxis(C, -2, 0))
+    heads, tails = list(F[..., :-1]), list(F[..., 1:])  # F[i, ..., j] and F[i, ..., 1 + j]
+    Ts, firsts = (list(T), None) if keep else ([T[0]] * m, list(F[..., :1]))
+    add, minimum, running_min = np.add, np.minimum, np.minimum.accumulate
     for i in range(m):
         a, b = (i, i + 1) if keep else (i % 2, 1 - i % 2)
-        Ti, Fn = (T[i] if keep else T[0]), tails[b]
+        Ti, Fn, Fa = Ts[i], tails[b], tails[a]
         if repeats and i > 0:  # previous target < j, or == j at a price
-            np.add(tails[a], repeat, out=prev)
-            np.minimum(prev, heads[a], out=prev)
-            np.add(rows[i], prev, out=Ti)
+            add(Fa, repeat, out=prev)
+            minimum(prev, heads[a], out=prev)
+            add(rows[i], prev, out=Ti)
         else:  # previous target < j
-            np.add(rows[i], heads[a], out=Ti)
-        np.minimum.accumulate(Ti, axis=-1, out=Fn)
-        np.add(tails[a], skip, out=prev)  # or row i skipped
-        np.minimum(Fn, prev, out=Fn)
+            add(rows[i], heads[a], out=Ti)
+        running_min(Ti, axis=-1, out=Fn)
+        add(Fa, skip, out=prev)  # or row i skipped
+        minimum(Fn, prev, out=Fn)
         if not keep:
-            F[b, ..., 0] = skip * (i + 1)
+            firsts[b][...] = skip * (i + 1)
     return F, (T if keep else None)
 
 

@@ -19,5 +19,6 @@ Laid out as scipy's ``integrate/_ivp``:
 from .basis import SPARSE_MODES
 from .driver import Simulation
 from .result import STOP_REASONS, Resolved, Run
+from .system import reuse_systems
 
-__all__ = ["Resolved", "Run", "STOP_REASONS", "Simulation", "SPARSE_MODES"]
+__all__ = ["Resolved", "Run", "STOP_REASONS", "Simulation", "SPARSE_MODES", "reuse_systems"]

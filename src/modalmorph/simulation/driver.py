@@ -73,15 +73,17 @@ class History:
         self.mean_distance, self.near = [], []
 
     def record(self, system: ModalSystem, x: np.ndarray, shape: np.ndarray,
-               targets: np.ndarray) -> None:
-        """The step at modal coordinates ``x``, nodes ``shape`` pulled to ``targets``."""
+               targets: np.ndarray, mean_distance: float | None = None) -> None:
+        """The step at modal coordinates ``x``, nodes ``shape`` pulled to ``targets``
+        (``mean_distance``: that of the matched pairs, when already measured)."""
         size = system.size
         self.shapes.append(system.reduced.to_user(shape))
         self.loads.append(system.options.k * (targets - shape) * size)  # (19)-(20) x k
         energy, e_node = system.energies(x)
         self.energy.append(energy)
         self.node_energy.append(e_node)
-        self.mean_distance.append(mean_pair_distance(shape, system.target_n, system.pairs))
+        self.mean_distance.append(mean_pair_distance(shape, system.target_n, system.pairs)
+                                  if mean_distance is None else mean_distance)
         self.near.append(mean_pair_distance(shape, system.target_n, system.pulled))
 
 
@@ -171,11 +173,11 @@ class Simulation:
         x, v, a = s.newmark.step(st.x, st.v, st.a, f)
         new = s.shape(x)
         self.state = State(x, v, a, new, st.targets, np.abs(new - st.shape).max())
-        if not np.all(np.isfinite(x)) or mean_pair_distance(new, s.target_n, s.pairs) > \
-                DIVERGED * max(self.history.mean_distance[0], 1):
+        dist = mean_pair_distance(new, s.target_n, s.pairs)  # recorded below
+        if not np.all(np.isfinite(x)) or dist > DIVERGED * max(self.history.mean_distance[0], 1):
             raise MorphDivergedError(_diverged(s.options, self.steps), self.steps)
         self.state = replace(self.state, targets=s.loads.targets(new))
-        self.history.record(s, x, new, self.state.targets)
+        self.history.record(s, x, new, self.state.targets, dist)
 
     def stop_test(self) -> str | None:
         """Whether to stop after the latest step, and why: ``"tolerance"`` (converged),

@@ -9,6 +9,8 @@ centroid and RMS radius of the shape it is built on).
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,8 +26,8 @@ from ..options import MorphOptions
 from .basis import Field, flat, mode_count, nodes, similarity_fields, superposed_modes
 from .result import Resolved
 
-__all__ = ["ModalSystem", "RANK_TOL", "several", "damping_matrix", "elastic_stiffness",
-           "frequency_range", "similarity_free", "springs"]
+__all__ = ["ModalSystem", "RANK_TOL", "reuse_systems", "several", "damping_matrix",
+           "elastic_stiffness", "frequency_range", "similarity_free", "springs"]
 
 RANK_TOL = 1e-10  # similarity fields whose modal image is below this fraction are dependent
 
@@ -110,35 +112,16 @@ class ModalSystem:
         source, target = as_shape(source, "source"), as_shape(target, "target")
         pairs = check_pairs(pairs, source.m, target.m)
         o = MorphOptions() if options is None else options
-        # The physical model: the source itself, or a coarser copy when it has more nodes
-        # than model_nodes; every node then moves with the element's displacement field.
-        reduced = coarsen(source, o.model_nodes)
-        model = FEModel(reduced, sigma=o.sigma, material=o.material, solver=o.solver)
-        n_modes = mode_count(o.modes, model.dim * model.m, sparse=model.truncated)
-        modes = superposed_modes(model, n_modes)
-        mass_modes = model.mass_times_modes(modes)  # M Phi = (I kron A) M_g psi (method.md §1)
-        # Reference scales: the stiffness and mass of one node in the Gaussian basis.
-        k_ref, V = self_entries(model.width, source.dim, *model.lame)
-        w_ref = np.sqrt(k_ref / (o.material.rho * V))
-        # one spring per node; with a reduced model their total stiffness is kept the same
-        k_abs = o.k * k_ref * model.m / source.m
-        X1 = reduced.to_normalized(source.points)  # all in the model's normalised frame
-        Y = reduced.to_normalized(target.points)
-        field, spread = _nodal_field(model, modes, X1, reduced is not source)
-        loads = _loads(source, target, X1, Y, pairs, o, partners)
-        stiffness = elastic_stiffness(modes, mass_modes, model.points, o.free_motion)
-        kappa, spring = springs(field, k_abs, consistent=o.loads == "consistent"
-                                and spread is None)
-        K_mod = stiffness + (spring if o.scheme == "implicit" else 0.0)
-        uniform = kappa is not None and o.scheme == "implicit"  # K_mod = K_el + kappa I
-        newmark = Newmark(K_mod, damping_matrix(o.damping, K_mod, spring, uniform=uniform),
-                          o.dt / w_ref, o.alpha, o.delta)
-        return cls(source=source, target=target, pairs=pairs, options=o, reduced=reduced,
-                   model=model, n_modes=n_modes, modes=modes, mass_modes=mass_modes,
-                   field=field, spread=spread, k_ref=k_ref, k_abs=k_abs, source_n=X1,
-                   target_n=Y, loads=loads, pulled=loads.pairs, stiffness=stiffness,
-                   kappa=kappa, newmark=newmark,
-                   partners=getattr(loads, "partners", None))
+        part = _cached(source, o)
+        if part is None:
+            part = _source_part(source, o)
+            _remember(source, o, part)
+        reduced = part["reduced"]
+        Y = reduced.to_normalized(target.points)  # the model's normalised frame
+        loads = _loads(source, target, part["source_n"], Y, pairs, o, partners)
+        return cls(source=source, target=target, pairs=pairs, options=o, target_n=Y,
+                   loads=loads, pulled=loads.pairs,
+                   partners=getattr(loads, "partners", None), **part)
 
     @property
     def size(self) -> float:
@@ -180,6 +163,67 @@ class ModalSystem:
         """The values resolved from the options (sigma, modes, model nodes, solver)."""
         return Resolved(sigma=self.model.sigma, modes=self.n_modes,
                         model_nodes=self.model.m, solver=self.model.solver)
+
+
+def _source_part(source: Shape, o: MorphOptions) -> dict:
+    """The fields of a :class:`ModalSystem` that depend on the source and the options
+    alone (not on the target or the pairs): the model, its modes, the reference scales,
+    the stiffness, the springs, the damping and the integrator."""
+    # The physical model: the source itself, or a coarser copy when it has more nodes
+    # than model_nodes; every node then moves with the element's displacement field.
+    reduced = coarsen(source, o.model_nodes)
+    model = FEModel(reduced, sigma=o.sigma, material=o.material, solver=o.solver)
+    n_modes = mode_count(o.modes, model.dim * model.m, sparse=model.truncated)
+    modes = superposed_modes(model, n_modes)
+    mass_modes = model.mass_times_modes(modes)  # M Phi = (I kron A) M_g psi (method.md §1)
+    # Reference scales: the stiffness and mass of one node in the Gaussian basis.
+    k_ref, V = self_entries(model.width, source.dim, *model.lame)
+    w_ref = np.sqrt(k_ref / (o.material.rho * V))
+    # one spring per node; with a reduced model their total stiffness is kept the same
+    k_abs = o.k * k_ref * model.m / source.m
+    X1 = reduced.to_normalized(source.points)  # all in the model's normalised frame
+    field, spread = _nodal_field(model, modes, X1, reduced is not source)
+    stiffness = elastic_stiffness(modes, mass_modes, model.points, o.free_motion)
+    kappa, spring = springs(field, k_abs, consistent=o.loads == "consistent"
+                            and spread is None)
+    K_mod = stiffness + (spring if o.scheme == "implicit" else 0.0)
+    uniform = kappa is not None and o.scheme == "implicit"  # K_mod = K_el + kappa I
+    newmark = Newmark(K_mod, damping_matrix(o.damping, K_mod, spring, uniform=uniform),
+                      o.dt / w_ref, o.alpha, o.delta)
+    return dict(reduced=reduced, model=model, n_modes=n_modes, modes=modes,
+                mass_modes=mass_modes, field=field, spread=spread, k_ref=k_ref,
+                k_abs=k_abs, source_n=X1, stiffness=stiffness, kappa=kappa,
+                newmark=newmark)
+
+
+# reuse_systems(): the source parts built in it, [(source, options, part)]; None outside
+_REUSED: ContextVar[list | None] = ContextVar("reused_systems", default=None)
+
+
+@contextmanager
+def reuse_systems():
+    """Within it, :meth:`ModalSystem.build` reuses the model, modes and integrator of a
+    system built before on the same :class:`Shape` object with equal options (a sequence
+    morphed from one frame: ``track(..., reference="first")``); the results are those of
+    a fresh build, bit for bit. What it holds is released on leaving."""
+    token = _REUSED.set([])
+    try:
+        yield
+    finally:
+        _REUSED.reset(token)
+
+
+def _cached(source: Shape, o: MorphOptions) -> dict | None:
+    for shape, options, part in _REUSED.get() or ():
+        if shape is source and options == o:
+            return part
+    return None
+
+
+def _remember(source: Shape, o: MorphOptions, part: dict) -> None:
+    reused = _REUSED.get()
+    if reused is not None:
+        reused.append((source, o, part))
 
 
 def several(source: Shape, target: Shape) -> bool:
@@ -272,7 +316,9 @@ def damping_matrix(damping, K_mod: np.ndarray, spring: np.ndarray, *,
     else:
         w_lo, w_hi = frequency_range(K_mod)  # (5) through two ratios, as the paper
         a, b = rayleigh(*damping, w_lo, w_hi)
-    return a * np.eye(n) + b * K_mod
+    C = b * K_mod  # a I + b K_mod
+    C.flat[::n + 1] += a
+    return C
 
 
 def frequency_range(K_mod: np.ndarray, *, highest: bool = True):
