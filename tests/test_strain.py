@@ -265,3 +265,21 @@ def test_phantom_segmented_boundaries_lie_on_the_noisy_masks():
         for step, inside in ((-1.0, True), (1.0, False)):  # a pixel is 0.71 px from its centre
             q = np.rint(p + sign * step * ray).astype(int)
             assert (ph.masks[3][q[:, 1], q[:, 0]] == inside).all()
+
+
+def test_cli_gives_the_library_defaults_and_its_flags_change_them(tmp_path, phantom):
+    """The command line measures what mm.strain measures with its defaults (the strain's
+    morph tolerance included), and a morph flag changes only that field."""
+    np.save(tmp_path / "ring.npy", phantom.masks[:4].astype(np.uint8))
+    assert main(["strain", str(tmp_path / "ring.npy"), "--out", str(tmp_path / "a"), "-q",
+                 "--no-figures"]) == 0
+    got = np.genfromtxt(tmp_path / "a" / "strain.csv", delimiter=",", names=True)
+    ref = mm.strain(phantom.masks[:4])
+    assert_allclose(got["radial"][got["segment"] == 0], ref.radial[:, 0], atol=1e-3)
+    assert main(["strain", str(tmp_path / "ring.npy"), "--out", str(tmp_path / "b"), "-q",
+                 "--no-figures", "--tol", "0.02"]) == 0
+    record = json.loads((tmp_path / "a" / "strain.json").read_text())["options"]
+    loose = json.loads((tmp_path / "b" / "strain.json").read_text())["options"]
+    assert record["morph"]["tol"] == 0.001 and loose["morph"]["tol"] == 0.02
+    assert loose["morph"]["k"] == record["morph"]["k"]  # the other fields kept
+    assert record["track"]["correspondence"] == "normal"

@@ -220,7 +220,8 @@ def strain(frames, *, options: StrainOptions | None = None,
     track_options, match_options, morph_options : optional
         Passed to :func:`modalmorph.track` for each contour (default: every frame
         reached from frame 0 straight, ``reference="first"``, see :data:`TRACK_REFERENCE`;
-        the morph's ``tol`` :data:`MORPH_TOL`).
+        the morph's ``tol`` :data:`MORPH_TOL`; a dict of morph fields changes those
+        defaults, a :class:`MorphOptions` replaces them).
     **overrides
         :class:`StrainOptions` fields.
 
@@ -253,8 +254,7 @@ def strain(frames, *, options: StrainOptions | None = None,
     topts = (track_options or TrackOptions(reference=TRACK_REFERENCE)).replace(
         correspondence=opts.correspondence)
     kw = dict(options=topts, names=names, match_options=match_options,
-              morph_options=MorphOptions(tol=MORPH_TOL) if morph_options is None
-              else morph_options)
+              morph_options=_morph_options(morph_options))
     tracks = [track(_observed([ring[k] for ring in rings], opts.nodes), **kw)
               for k in range(1 if opts.endo_only else 2)]
     endo = _smoothed(tracks[0].points, opts)
@@ -263,7 +263,8 @@ def strain(frames, *, options: StrainOptions | None = None,
     angle = _reference_angle(opts, endo[opts.reference_frame], masks, spacing)
     values = wall_strain(endo, epi, reference=opts.reference_frame, segments=opts.segments,
                          angle=angle)
-    params = dict(opts.record(), reference_angle=angle, spacing=list(spacing))
+    params = dict(opts.record(), reference_angle=angle, spacing=list(spacing),
+                  track=topts.record(), morph=kw["morph_options"].record())
     return Strain(**values, endo=endo, epi=epi, reference=opts.reference_frame,
                   reference_angle=angle, names=names, tracks=tuple(tracks),
                   masks=masks, spacing=spacing, params=params)
@@ -277,6 +278,14 @@ def _smoothed(points: np.ndarray, opts: StrainOptions) -> np.ndarray:
     from scipy.ndimage import gaussian_filter1d
 
     return gaussian_filter1d(points, opts.smooth_frames, axis=0, mode="nearest")
+
+
+def _morph_options(value) -> MorphOptions:
+    """The strain's morph options: the defaults with ``tol`` :data:`MORPH_TOL`, changed by
+    the fields of a dict (the command line's flags), or the object given as it is."""
+    if isinstance(value, MorphOptions):
+        return value
+    return MorphOptions(tol=MORPH_TOL).replace(**(value or {}))
 
 
 def _observed(contours, nodes: int) -> list:

@@ -61,7 +61,10 @@ def run_strain(args) -> int:
                     options=objects[StrainOptions],
                     match_options=None if objects[MatchOptions] == MatchOptions() else
                     objects[MatchOptions],
-                    morph_options=objects[MorphOptions])
+                    morph_options={  # the flags given, over the strain's defaults
+                        f.name: getattr(objects[MorphOptions], f.name)
+                        for name, cls, f in flat_fields(STRAIN_CLASSES)
+                        if cls is MorphOptions and name in values})
     files = write_strain(result, args.out, inputs=args.inputs, figures=args.figures,
                          report=args.html)
     if not args.quiet:
