@@ -197,3 +197,15 @@ def test_footprints_command(tmp_path):
     assert (tmp_path / "out" / "footprints.png").exists()
     assert main(["footprints", str(path), "--template", "7", "--out",
                  str(tmp_path / "bad"), "-q"]) == 2  # no image 7: one line, exit 2
+
+
+def test_a_single_loaded_sensor_is_skipped_though_the_smoothing_spreads_it(tmp_path, caplog):
+    """One sensor loaded (the smoothing spreads it over its neighbours above the level):
+    skipped and said, not tracked as a part."""
+    stack = np.zeros((5, 20, 10))
+    stack[:, 5:9, 3:7] = 50.0
+    stack[1, 15, 5] = 80.0  # one sensor, in one frame
+    with caplog.at_level("INFO"):
+        result = stance(stack)
+    assert len(result.parts) == 1
+    assert "1 contact(s) smaller than 2 sensors skipped" in caplog.text

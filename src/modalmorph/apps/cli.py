@@ -77,10 +77,10 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # argparse: --help, --version (0) or a usage error (2)
         return int(exc.code or 0)
-    fresh = not logging.getLogger().handlers  # else a host (pytest) owns the handlers
-    logging.basicConfig(level=logging.WARNING, format="%(message)s")  # others' warnings
-    log.setLevel(logging.WARNING if args.quiet else logging.INFO)  # our own information
-    if fresh:  # log lines name flags, as the errors and warnings below
+    fresh = not logging.getLogger().handlers  # else a host (pytest) owns the logging
+    if fresh:  # others' warnings, our information; log lines name flags, as errors do
+        logging.basicConfig(level=logging.WARNING, format="%(message)s")
+        log.setLevel(logging.WARNING if args.quiet else logging.INFO)
         logging.getLogger().handlers[0].addFilter(_FlagFilter())
     # a morph short of its tolerance is said once, by the status line or the warning below
     logging.getLogger("modalmorph.simulation").setLevel(logging.WARNING)

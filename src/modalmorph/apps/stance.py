@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OptionError
-from ..figures.stance import plot_footprints, save_stance_figures
+from ..figures.stance import length_unit, plot_footprints, save_stance_figures
 from ..io import atomic_output_dir
 from ..io.pressure import jiku_conditions, jiku_peaks, jiku_trial, read_pressure
 from ..options import StanceOptions, split
@@ -173,7 +173,7 @@ def stance_files(source, out, options: StanceOptions, *, quiet: bool = False) ->
         fit = max(float(p.node_distance.max()) for p in result.parts)
         print(f"{result.n_frames} frames, {len(result.parts)} parts; total strain energy "
               f"{float(result.energy.sum()):.4g}; largest node-to-boundary distance "
-              f"{fit:.3g} mm", file=sys.stderr)
+              f"{fit:.3g} {length_unit(result.params['pixel_size'])}", file=sys.stderr)
         for path in ["result.json", "stance.csv", "parts.npz", *(f.name for f in figures)]:
             print(f"  {Path(out) / path}", file=sys.stderr)
     return 0

@@ -14,8 +14,8 @@ import numpy as np
 
 from ._draw import ENERGY_RANGE, import_matplotlib
 
-__all__ = ["MAX_PANELS", "plot_footprints", "plot_part_energy", "plot_stance_frames",
-           "pressure_label", "save_stance_figures"]
+__all__ = ["MAX_PANELS", "length_unit", "plot_footprints", "plot_part_energy",
+           "plot_stance_frames", "pressure_label", "save_stance_figures"]
 
 MAX_PANELS = 8  # frames drawn side by side at most (8 footprints of 33 x 63 sensors fit A4)
 # Part colours: 20 distinct ones (a real stance phase has up to 18 parts; tab10 gave
@@ -29,7 +29,8 @@ def _colour(part: int):
     return matplotlib.colormaps[_CYCLE](part % _COLOURS)
 
 
-def _length_unit(pixel_size: float) -> str:
+def length_unit(pixel_size: float) -> str:
+    """The unit of lengths at this sensor pitch: mm, or sensors at pitch 1."""
     return "mm" if pixel_size != 1 else "sensors"
 
 
@@ -79,9 +80,9 @@ def plot_stance_frames(stance, *, frames=None, fig=None):
                 ax.plot(*np.vstack([p, p[:1]]).T, ".-", color=_colour(part.part), ms=2,
                         lw=0.6)
         ax.set_title(f"frame {stance.frames[f]}", fontsize=8)
-        ax.set_xlabel(f"x ({_length_unit(px)})", fontsize=8)
+        ax.set_xlabel(f"x ({length_unit(px)})", fontsize=8)
         ax.tick_params(labelsize=7)
-    axes[0].set_ylabel(f"y ({_length_unit(px)}), walking direction", fontsize=8)
+    axes[0].set_ylabel(f"y ({length_unit(px)}), walking direction", fontsize=8)
     fig.colorbar(image, ax=list(axes), shrink=0.8, label=pressure_label(stance.params))
     return fig
 

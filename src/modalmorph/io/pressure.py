@@ -139,7 +139,9 @@ def frame_parts(frame: np.ndarray, level: float, *, pixel_size: float = 1.0,
             lab, n = ndimage.label(loaded & (regions == r))
             labels[lab > 0] = lab[lab > 0] + count
             count += n
-    sizes = np.bincount(labels.ravel(), minlength=count + 1)[1:]
+    # a part's size counts the sensors loaded in the frame itself: the smoothing spreads a
+    # single loaded sensor over its neighbours, and that contact is still one sensor
+    sizes = np.bincount(labels[frame > level], minlength=count + 1)[1:]
     keep = np.flatnonzero(sizes >= min_sensors) + 1
     relabel = np.zeros(count + 1, dtype=np.intp)
     relabel[keep] = np.arange(1, len(keep) + 1)
