@@ -237,7 +237,7 @@ def strain(frames, *, options: StrainOptions | None = None,
         invalid options.
     """
     opts = (options or StrainOptions()).replace(**overrides)
-    masks, spacing, names, shapes = _masks_of(frames, names)
+    masks, spacing, unit, names, shapes = _masks_of(frames, names)
     if masks is not None:
         with warnings.catch_warnings(record=True) as said:
             warnings.simplefilter("always")
@@ -263,7 +263,7 @@ def strain(frames, *, options: StrainOptions | None = None,
     angle = _reference_angle(opts, endo[opts.reference_frame], masks, spacing)
     values = wall_strain(endo, epi, reference=opts.reference_frame, segments=opts.segments,
                          angle=angle)
-    params = dict(opts.record(), reference_angle=angle, spacing=list(spacing),
+    params = dict(opts.record(), reference_angle=angle, spacing=list(spacing), unit=unit,
                   track=topts.record(), morph=kw["morph_options"].record())
     return Strain(**values, endo=endo, epi=epi, reference=opts.reference_frame,
                   reference_angle=angle, names=names, tracks=tuple(tracks),
@@ -434,9 +434,9 @@ def _reference_angle(opts: StrainOptions, ref_endo, masks, spacing) -> float:
 
 
 def _masks_of(frames, names):
-    """``(masks (F, H, W) or None, spacing (x, y), names, frames)`` of the inputs: masks,
-    or (``masks`` None) the frames as contours (contour files read as Shapes)."""
-    spacing, masks = (1.0, 1.0), None
+    """``(masks (F, H, W) or None, spacing (x, y), unit, names, frames)`` of the inputs:
+    masks, or (``masks`` None) the frames as contours (contour files read as Shapes)."""
+    spacing, masks, unit = (1.0, 1.0), None, "px"
     paths = [frames] if isinstance(frames, str | Path) else list(frames) if (
         isinstance(frames, Sequence) and len(frames) and
         all(isinstance(f, str | Path) for f in frames)) else None
@@ -445,11 +445,12 @@ def _masks_of(frames, names):
 
         frames = [read_shape(p) for p in paths]
         names = tuple(Path(p).name for p in paths) if names is None else names
+        unit = "input units" if frames[0].frame is None else frames[0].frame.unit
     elif paths:
         from .io.masks import read_masks
 
         read = read_masks(paths)
-        masks, spacing = read.frames, read.spacing
+        masks, spacing, unit = read.frames, read.spacing, read.unit
         names = read.names if names is None else names
     elif isinstance(frames, np.ndarray) and frames.ndim == 3 or (
             isinstance(frames, Sequence) and len(frames) and
@@ -466,7 +467,7 @@ def _masks_of(frames, names):
     names = tuple(f"frame {i}" for i in range(n)) if names is None else tuple(map(str, names))
     if len(names) != n:
         raise ValueError(f"names must have one entry per frame ({n}), got {len(names)}")
-    return masks, spacing, names, frames
+    return masks, spacing, unit, names, frames
 
 
 def mask_ring(mask, name: str, options: StrainOptions | None = None, *,

@@ -153,8 +153,14 @@ def _figures(result, folder: Path) -> None:
 
     from ..figures.strain import plot_bullseye, plot_strain_curves, plot_wall
 
+    kinds = ("circumferential_endo",) if result.endo_only else ("radial", "circumferential")
+    rings = plt.figure(figsize=(4.4 * len(kinds), 4.4), layout="constrained")
+    for kind, ax in zip(kinds, rings.subplots(1, len(kinds), squeeze=False,
+                                              subplot_kw={"projection": "polar"}).ravel(),
+                        strict=True):
+        plot_bullseye(result, kind, ax=ax)
     for name, fig in (("strain_curves.png", plot_strain_curves(result)),
-                      ("bullseye.png", plot_bullseye(result).figure),
+                      ("bullseye.png", rings),
                       ("wall.png", plot_wall(result))):
         fig.savefig(folder / name, dpi=DPI)
         plt.close(fig)

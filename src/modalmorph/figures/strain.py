@@ -17,6 +17,10 @@ def _plt():
     return plt
 
 
+# The walls in colours no segment has (segments: the first colours of SEGMENT_COLORS).
+ENDO_COLOR, EPI_COLOR = "magenta", "cyan"
+
+
 def _kinds(result) -> tuple:
     return (("circumferential_endo",) if result.endo_only else
             ("radial", "circumferential", "circumferential_endo", "circumferential_epi"))
@@ -103,7 +107,7 @@ def plot_wall(result, frames=None, *, fig=None):
     if frames is None:
         frames = (result.reference, int(result.peak(kind)[1][0]))
     if fig is None:
-        fig = plt.figure(figsize=(4.2 * len(frames), 4.4), layout="constrained")
+        fig = plt.figure(figsize=(4.2 * len(frames), 4.9), layout="constrained")
     axes = fig.subplots(1, len(frames), squeeze=False).ravel()
     box = _box(result)
     for ax, f in zip(axes, frames, strict=True):
@@ -112,7 +116,7 @@ def plot_wall(result, frames=None, *, fig=None):
             h, w = result.masks.shape[1:]
             ax.imshow(result.masks[f] != 0, cmap="gray", vmin=0, vmax=2.5,
                       extent=(-0.5 * sx, (w - 0.5) * sx, (h - 0.5) * sy, -0.5 * sy))
-        for p, color in ((result.endo[f], "tab:red"), (result.epi[f], "tab:blue")):
+        for p, color in ((result.endo[f], ENDO_COLOR), (result.epi[f], EPI_COLOR)):
             if len(p):
                 ax.plot(*np.vstack([p, p[:1]]).T, color=color, lw=1.2)
         if not result.endo_only:
@@ -124,7 +128,24 @@ def plot_wall(result, frames=None, *, fig=None):
         ax.set_ylim(box[3], box[1])
         ax.set_aspect("equal")
         ax.set_title(f"frame {f} ({result.names[f]})", fontsize=9)
+        unit = result.params.get("unit", "px")
+        ax.set_xlabel(f"x ({unit})")
+        ax.set_ylabel(f"y ({unit})")
+    fig.legend(handles=_wall_legend(result), fontsize=8, loc="outside lower center",
+               ncol=4, frameon=False)
     return fig
+
+
+def _wall_legend(result) -> list:
+    """What the wall figure's lines are."""
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color=ENDO_COLOR, label="endocardium")]
+    if not result.endo_only:
+        handles += [Line2D([], [], color=EPI_COLOR, label="epicardium"),
+                    Line2D([], [], color=_color(1), label="chords (colour: segment)")]
+    return handles + [Line2D([], [], ls="", marker="+", color="yellow",
+                             label="reference centre")]
 
 
 def _box(result) -> tuple:
