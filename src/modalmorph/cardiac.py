@@ -249,8 +249,8 @@ def strain(frames, *, options: StrainOptions | None = None,
     else:
         rings = [_shape_ring(s, names[f], opts) for f, s in enumerate(shapes)]
     if opts.reference_frame >= len(rings):
-        raise OptionError(f"reference_frame must be a frame (0..{len(rings) - 1}), got "
-                          f"{opts.reference_frame}")
+        raise OptionError(f"reference_frame={opts.reference_frame} is not a frame: the "
+                          f"frames are 0..{len(rings) - 1}")
     topts = (track_options or TrackOptions(reference=TRACK_REFERENCE)).replace(
         correspondence=opts.correspondence)
     kw = dict(options=topts, names=names, match_options=match_options,

@@ -25,7 +25,7 @@ from ..errors import MorphDivergedError, OptionError
 from ..figures import plot_matches
 from ..io import atomic_output_dir, atomic_write
 from ..matching import match
-from ..options import MatchOptions, ReadOptions, flat_fields
+from ..options import MatchOptions, ReadOptions, StanceOptions, StrainOptions, flat_fields
 from ..version import __version__
 from . import batch, strain
 from . import stance as stance_app
@@ -112,7 +112,8 @@ def _flags() -> dict:
     """``{flat option name: (its flag, whether it is a --x/--no-x switch)}``."""
     return {name: (f.metadata.get("flag") or "--" + name.replace("_", "-"),
                    f.metadata["kind"] == "bool")
-            for name, _cls, f in flat_fields(SEQUENCE_CLASSES)}
+            for name, _cls, f in flat_fields((*SEQUENCE_CLASSES, StrainOptions,
+                                              StanceOptions))}
 
 
 _FLAGS = _flags()
