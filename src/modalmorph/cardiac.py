@@ -44,6 +44,7 @@ import numpy as np
 
 from .core.shape import Shape, resample
 from .errors import OptionError, ShapeError
+from .io.images import MIN_OBJECT_PIXELS, choose_objects
 from .options import MatchOptions, MorphOptions, StrainOptions, TrackOptions
 from .tracking import track
 
@@ -75,7 +76,9 @@ DEFINITIONS = {
                 "10 frames or more)",
 }
 CONTOUR_FILES = (".csv", ".tsv", ".txt", ".json", ".svg")  # read as contours, not masks
-MIN_HOLE_PIXELS = 9  # a hole smaller than a 3 x 3 block is a speck, not a ventricle
+# A hole smaller than a 3 x 3 block is a speck, not a ventricle: io's measured
+# MIN_HOLE_AREA (8.5 px^2 by marching squares), counted in pixels.
+MIN_HOLE_PIXELS = MIN_OBJECT_PIXELS
 # Gaussian blur (px) of a mask before its 0.5 level is taken: sub-pixel boundaries. On the
 # 30-frame ring phantoms (128 x 128, LV 60 px, no noise) the largest error of the global
 # radial strain falls from 1.54 to 0.86 points (benchmarks/strain.py).
@@ -239,13 +242,12 @@ def strain(frames, *, options: StrainOptions | None = None,
     opts = (options or StrainOptions()).replace(**overrides)
     masks, spacing, unit, names, shapes = _masks_of(frames, names)
     if masks is not None:
-        with warnings.catch_warnings(record=True) as said:
-            warnings.simplefilter("always")
-            rings = [mask_ring(m, names[f], opts, spacing=spacing)
-                     for f, m in enumerate(masks)]
+        said: list[str] = []
+        rings = [mask_ring(m, names[f], opts, spacing=spacing, say=said.append)
+                 for f, m in enumerate(masks)]
         if said:  # the choice of object once, not once per frame
             more = f" (and in {len(said) - 1} more frames)" if len(said) > 1 else ""
-            warnings.warn(f"{said[0].message}{more}", stacklevel=2)
+            warnings.warn(f"{said[0]}{more}", stacklevel=2)
     else:
         rings = [_shape_ring(s, names[f], opts) for f, s in enumerate(shapes)]
     if opts.reference_frame >= len(rings):
@@ -471,14 +473,15 @@ def _masks_of(frames, names):
 
 
 def mask_ring(mask, name: str, options: StrainOptions | None = None, *,
-              spacing=(1.0, 1.0)) -> tuple[np.ndarray, np.ndarray | None]:
+              spacing=(1.0, 1.0), say=None) -> tuple[np.ndarray, np.ndarray | None]:
     """``(endocardium (m, 2), epicardium (m, 2) or None)`` of a myocardium mask.
 
-    The wall is the ``label`` pixels (or every non-zero pixel); of several objects the
-    chosen one (``object``; said in a warning); its largest hole is the endocardium, its
-    outer boundary the epicardium, each resampled to ``nodes`` nodes, in ``(x, y) =
-    (column, row) * spacing``. ``endo_only``: the hole, or without one the object's own
-    boundary (a blood-pool mask).
+    The wall is the ``label`` pixels (or every non-zero pixel); of several 8-connected
+    objects the chosen one (``object``, by io's rule; said in a warning, or to ``say``
+    when given); its largest hole is the endocardium, its outer boundary the epicardium,
+    each resampled to ``nodes`` nodes, in ``(x, y) = (column, row) * spacing``.
+    ``endo_only``: the hole, or without one the object's own boundary (a blood-pool
+    mask).
 
     Raises
     ------
@@ -490,7 +493,10 @@ def mask_ring(mask, name: str, options: StrainOptions | None = None, *,
     opts = options or StrainOptions()
     mask = np.asarray(mask)
     wall = mask == opts.label if opts.label is not None else mask != 0
-    wall = _choose(wall, opts.object, name)
+    if not wall.any():
+        raise ShapeError(f"{name}: the mask is empty (no wall pixel)")
+    say = say or (lambda text: warnings.warn(text, stacklevel=3))
+    wall = choose_objects(wall, opts.object, name, connectivity=2, say=say)[0]
     holes, count = ndimage.label(ndimage.binary_fill_holes(wall) & ~wall)
     sizes = np.bincount(holes.ravel())[1:]
     if not count or sizes.max() < MIN_HOLE_PIXELS:
@@ -503,32 +509,6 @@ def mask_ring(mask, name: str, options: StrainOptions | None = None, *,
     if opts.endo_only:
         return endo, None
     return endo, _outline(ndimage.binary_fill_holes(wall), spacing)
-
-
-def _choose(wall: np.ndarray, choice, name: str) -> np.ndarray:
-    """The chosen object of a mask (largest, nearest the centre, or a number)."""
-    from scipy import ndimage
-
-    labels, count = ndimage.label(wall, structure=np.ones((3, 3)))
-    if count == 0:
-        raise ShapeError(f"{name}: the mask is empty (no wall pixel)")
-    if count == 1:
-        return wall
-    area = np.bincount(labels.ravel())[1:]
-    if choice == "center":
-        rows, cols = np.indices(wall.shape)
-        dist = np.hypot(rows - (wall.shape[0] - 1) / 2, cols - (wall.shape[1] - 1) / 2)
-        pick, why = int(np.argmin(ndimage.minimum(dist, labels, range(1, count + 1)))), \
-            "nearest the image centre"
-    elif isinstance(choice, str):
-        pick, why = int(np.argmax(area)), "the largest"
-    elif choice > count:
-        raise ShapeError(f"{name}: object={choice}, but the mask has {count} objects")
-    else:
-        pick, why = choice - 1, "as asked"
-    warnings.warn(f"{name}: the mask has {count} objects; took object {pick + 1} ({why}, "
-                  f"{area[pick]} px); object= chooses another", stacklevel=3)
-    return labels == pick + 1
 
 
 def _outline(region: np.ndarray, spacing) -> np.ndarray:

@@ -183,7 +183,7 @@ def mask_contours(mask: np.ndarray, name: str, choice="largest") -> list[np.ndar
     from skimage.measure import find_contours
 
     out = []
-    for chosen in _choose_objects(mask, choice, name):
+    for chosen in choose_objects(mask, choice, name):
         padded = np.pad(chosen, 1).astype(np.float64)  # closes contours at the image's edge
         loops = [c[:-1, ::-1] - 1.0 for c in find_contours(padded, 0.5)]  # (x, y), open
         areas = np.array([area(c) for c in loops])
@@ -229,14 +229,18 @@ def _image_mask(grey: np.ndarray, name: str, threshold: float | None) -> np.ndar
     return mask
 
 
-def _choose_objects(mask: np.ndarray, choice, name: str) -> list[np.ndarray]:
-    """The pixels (bool, like ``mask``) of the object ``choice`` names among the
-    4-connected objects of ``mask`` (the connectivity of the contour), logged; for
-    ``"all"``, of each object of :data:`MIN_OBJECT_PIXELS` or more (the largest if none)."""
+def choose_objects(mask: np.ndarray, choice, name: str, connectivity: int = 1,
+                   say=None) -> list[np.ndarray]:
+    """The pixels (bool, like ``mask``) of the object ``choice`` names among the objects
+    of ``mask``, logged; for ``"all"``, of each object of :data:`MIN_OBJECT_PIXELS` or
+    more (the largest if none). ``connectivity`` 1 (4-connected: the connectivity of the
+    contour, the default) or 2 (8-connected: a myocardial wall one pixel thick in places
+    stays one object). ``say``: a callable that takes the sentence naming the choice when
+    there are several objects, instead of the log."""
     from scipy import ndimage
     from skimage.measure import label
 
-    labels, count = label(mask, connectivity=1, return_num=True)  # reading order
+    labels, count = label(mask, connectivity=connectivity, return_num=True)  # reading order
     index = np.arange(1, count + 1)
     area = np.bincount(labels.ravel(), minlength=count + 1)[1:]
     if isinstance(choice, str) and choice == "all":
@@ -260,9 +264,12 @@ def _choose_objects(mask: np.ndarray, choice, name: str) -> list[np.ndarray]:
     else:
         pick, why = choice - 1, "as asked"
     where = "touches the image border" if border[pick] else "inside the image"
-    _log.log(logging.INFO if count > 1 else logging.DEBUG,  # a choice is said, not a fact
-             "%s: object %d of %d (%s): %d px, %s", name, pick + 1, count, why, area[pick],
-             where)
+    sentence = (f"{name}: object {pick + 1} of {count} ({why}): {area[pick]} px, {where}; "
+                f"object= chooses another")
+    if say is not None and count > 1:
+        say(sentence)
+    else:
+        _log.log(logging.INFO if count > 1 else logging.DEBUG, sentence)  # a choice is said
     return [labels == pick + 1]
 
 
