@@ -24,7 +24,9 @@ node error against the truth in frame 0's mean node spacing (median and worst ov
 node of every frame with a truth), ``closure`` median / worst ``closure_error`` in
 spacings (``cycle=True`` families), ``fit max`` the worst two-way distance of a tracked
 frame to its contour in spacings, ``crossed`` frames whose tracked contour crosses
-itself, ``conv`` converged morphs / morphs, ``failed`` sequences that raised.
+itself, ``conv`` converged morphs / morphs, ``failed`` sequences that raised,
+``redone`` frames (2 and later) of ``"first"`` morphed from the previous frame instead
+(``Track.source_frame``), ``warned`` frames where neither morph passed (a warning).
 
 Run from the repository root, single-threaded BLAS for comparable numbers:
 
@@ -36,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import time
+import warnings
 
 import numpy as np
 from realdata import DATA, glyph_outline, heart_pairs, horse_contour
@@ -174,8 +177,10 @@ def measure(frames, truth, cycle, reference, correspondence="nearest"):
                              axis=1).mean()
     start = time.process_time()
     try:
-        result = track(frames, reference=reference, cycle=cycle,
-                       correspondence=correspondence)
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            result = track(frames, reference=reference, cycle=cycle,
+                           correspondence=correspondence)
     except ValueError as exc:
         return dict(failed=1, error=str(exc).splitlines()[0])
     seconds = time.process_time() - start
@@ -186,7 +191,9 @@ def measure(frames, truth, cycle, reference, correspondence="nearest"):
                 closure=result.closure_error / spacing if cycle else np.nan,
                 fit=float(result.distance.max() / spacing),
                 crossed=int(result.crossed.sum()),
-                conv=sum(r.converged for r in result.morphs), morphs=len(result.morphs))
+                conv=sum(r.converged for r in result.morphs), morphs=len(result.morphs),
+                redone=int(np.sum(result.source_frame[2:] != 0)) if reference == "first" else 0,
+                warned=sum(issubclass(w.category, UserWarning) for w in said))
 
 
 def pair(values, fmt="{:.2f}"):
@@ -208,7 +215,8 @@ def row(family, reference, runs):
             f"{max((r['fit'] for r in ok), default=np.nan):>7.2f} "
             f"{sum(r['crossed'] for r in ok):>7} "
             f"{sum(r['conv'] for r in ok):>5}/{sum(r['morphs'] for r in ok):<5} "
-            f"{sum(r['failed'] for r in runs):>6}")
+            f"{sum(r['failed'] for r in runs):>6} {sum(r['redone'] for r in ok):>6} "
+            f"{sum(r['warned'] for r in ok):>6}")
 
 
 def main(argv=None):
@@ -222,7 +230,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     print(f"{'family':<18} {'reference':<9} {'seq':>4} {'nodes':>9} {'cpu s':>7} "
           f"{'err med/max':>13} {'closure':>13} {'fit max':>7} {'crossed':>7} "
-          f"{'conv':>11} {'failed':>6}", flush=True)
+          f"{'conv':>11} {'failed':>6} {'redone':>6} {'warned':>6}", flush=True)
     for family in args.families:
         runs = {}
         for group, name, frames, truth, cycle in sequences(family, args.sizes):
@@ -234,7 +242,8 @@ def main(argv=None):
                         r["error"] if r["failed"] else
                         f"{r['seconds']:.3f} s err {pair(r['err'])} "
                         f"closure {r['closure']:.2f} fit {r['fit']:.2f} "
-                        f"crossed {r['crossed']} conv {r['conv']}/{r['morphs']}"), flush=True)
+                        f"crossed {r['crossed']} conv {r['conv']}/{r['morphs']} "
+                        f"redone {r['redone']} warned {r['warned']}"), flush=True)
         for group, by_ref in runs.items():
             for ref, rs in by_ref.items():
                 print(row(group, ref, rs), flush=True)

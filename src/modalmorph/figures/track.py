@@ -95,15 +95,12 @@ def energy_labels(track) -> tuple[str, str]:
     reached (``track.source_frame``): one morph from frame 0 each, a chain of
     frame-to-frame morphs, or some of each."""
     source = np.asarray(track.source_frame)[1:]
-    steps = np.arange(len(source))  # f - 1 for frames 1..F-1
-    first = track.names[0]
-    if not np.any(source != 0):
-        return f"energy from {first}", f"strain energy (22) of the morph from {first}"
-    if np.array_equal(source, steps):
-        return ("energy summed over the frames",
-                f"strain energy (22) summed frame to frame from {first}")
-    return ("energy from " + first, f"strain energy (22) from {first} (summed over "
-            "the frames morphed from the previous one)")
+    if not source.any():
+        return "energy from frame 0", "strain energy (22) of the morph from frame 0"
+    if np.array_equal(source, np.arange(len(source))):
+        return "energy summed frame to frame", "strain energy (22) summed frame to frame"
+    return ("energy from frame 0", "strain energy (22) from frame 0 (summed where a "
+            "frame came from the previous one)")
 
 
 def plot_track_curves(track, *, ax=None):
