@@ -88,9 +88,8 @@ class Track:
         Strain energy summed over the morphs that lead from frame 0 to frame ``f``
         (``energy[f] + cumulative_energy[source_frame[f]]``): with ``"first"`` the one
         morph from frame 0, so ``energy`` itself; with ``"previous"`` every step,
-        ``cumsum(energy)``. Defined the same way for both, so the curves of the two
-        references can be set side by side; the steps' sum exceeds the single morph's
-        energy.
+        ``cumsum(energy)``. Defined the same way for both; the values differ (over a
+        cycle the steps add up while the morph from frame 0 returns to 0).
     edges : ndarray of int, shape (e, 2)
         The stretches between nodes whose strain is measured (:attr:`Shape.edges` of
         frame 0: the edges of each contour, or of a surface's triangles; none for point
