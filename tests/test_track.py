@@ -85,7 +85,8 @@ def test_energies_mean_the_same_for_both_references(hearts):
 
 
 def test_first_falls_back_to_the_previous_frame(hearts, monkeypatch):
-    """A frame whose morph from frame 0 raises or does not converge is morphed from the
+    """A frame whose morph from frame 0 raises, does not converge or ends off the contour
+    is morphed from the
     tracked previous frame, as "previous" does; when that one fails too, the morph from
     frame 0 is kept, with a warning."""
     from modalmorph import tracking
@@ -118,6 +119,18 @@ def test_first_falls_back_to_the_previous_frame(hearts, monkeypatch):
     with pytest.warns(UserWarning, match=r"frame 3 \(frame 3\): neither its morph"):
         kept = track(frames)
     assert kept.source_frame.tolist() == [0, 0, 0, 0, 0]
+
+    def off(source, target, **kw):  # from frame 0 onto frame 4: 3 spacings off the contour
+        result = plain(source, target, **kw)
+        if np.array_equal(source.points, ed) and np.array_equal(target.points, frames[4]):
+            shift = 3 * np.linalg.norm(np.diff(ed, axis=0), axis=1).mean()
+            return dataclasses.replace(result, shapes=result.shapes + [shift, 0])
+        return result
+
+    monkeypatch.setattr(tracking, "morph", off)
+    moved = track(frames)
+    assert moved.source_frame.tolist() == [0, 0, 0, 0, 3]
+    assert moved.distance[4] <= 0.5 * np.linalg.norm(np.diff(ed, axis=0), axis=1).mean()
 
 
 def test_track_invariants(hearts):

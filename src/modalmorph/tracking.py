@@ -47,10 +47,11 @@ log = logging.getLogger(__name__)
 
 # A frame reached from frame 0 (reference="first") is redone from the tracked previous
 # frame when its morph did not converge, its contour crosses itself, or it lies farther
-# than this many of frame 0's node spacings from the observed object (curve_distance).
+# than this many of frame 0's node spacings from the observed contour (curve_distance).
 # Sound tracks of the corpus of benchmarks/track.py (hearts, pressure parts, warped
-# glyphs and horse) lie within 0.25 (0.78 on a pressure part whose morphs did not
-# converge); wrong correspondences (nearest pairs on frames turned by 90-180 degrees) 2-35.
+# glyphs and horse) lie within 0.25 mean edge lengths (0.78 on a pressure part whose
+# morphs did not converge); wrong correspondences (nearest pairs on frames turned by
+# 90-180 degrees) 2-35.
 FIT_SPACINGS = 1.0
 
 
@@ -174,13 +175,13 @@ def track(frames, *, options: TrackOptions | None = None,
     to its own data (no drift away from the contours). With ``"first"`` frame 0's model,
     modes and integrator are built once for every frame
     (:func:`modalmorph.simulation.reuse_systems`), and a frame whose morph from frame 0
-    fails its own test (raises, does not converge, crosses itself, or ends farther than
-    :data:`FIT_SPACINGS` node spacings from the observed object) is morphed from the
-    tracked previous frame instead, kept when that one passes (``source_frame`` says
-    which). ``"nearest"`` pairs the objects centred and scaled to one size: it follows
-    changes of size and position, not a turn by more than about a node spacing from
-    the frame a morph starts from; for objects that turn, use
-    ``correspondence="modal"`` (benchmarks/track.py).
+    fails its own test (raises, does not converge, crosses itself, or, for contours,
+    ends farther than :data:`FIT_SPACINGS` node spacings from the observed contour) is
+    morphed from the tracked previous frame instead, kept when that one passes
+    (``source_frame`` says which; a warning says when neither passes). ``"nearest"``
+    pairs the objects centred and scaled to one size: it follows changes of size and
+    position, not a turn by more than about a node spacing from the frame a morph starts
+    from; for objects that turn, use ``correspondence="modal"`` (benchmarks/track.py).
 
     Parameters
     ----------
@@ -286,12 +287,15 @@ def _attempt(step, source: Shape, target: Shape, f: int) -> Morph | None:
 
 
 def _sound(result: Morph, first: Shape, observed: Shape) -> bool:
-    """A frame's morph that converged to a tracked shape that does not cross itself and
-    lies within :data:`FIT_SPACINGS` of frame 0's node spacing of the observed object."""
+    """A frame's morph that converged to a tracked shape that does not cross itself and,
+    for contours, lies within :data:`FIT_SPACINGS` of frame 0's node spacing of the
+    observed contour (surfaces and point sets: node to node distances depend on how
+    densely each frame is sampled, so no such test)."""
     end = result.shapes[-1]
-    return bool(result.converged) and not _crosses_itself(end, first) and \
-        curve_distance(first.with_points(end), observed) <= \
-        FIT_SPACINGS * first.spacing * first.size
+    if not result.converged or _crosses_itself(end, first):
+        return False
+    return not (first.ordered and first.faces is None) or curve_distance(
+        first.with_points(end), observed) <= FIT_SPACINGS * first.spacing * first.size
 
 
 def _morph_frame(source: Shape, target: Shape, f: int, *, names: tuple,
