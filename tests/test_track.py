@@ -86,9 +86,8 @@ def test_energies_mean_the_same_for_both_references(hearts):
 
 def test_first_falls_back_to_the_previous_frame(hearts, monkeypatch):
     """A frame whose morph from frame 0 raises, does not converge or ends off the contour
-    is morphed from the
-    tracked previous frame, as "previous" does; when that one fails too, the morph from
-    frame 0 is kept, with a warning."""
+    is morphed from the tracked previous frame, as "previous" does; when that one fails
+    too, the morph from frame 0 is kept, with a warning."""
     from modalmorph import tracking
 
     ed = resample(hearts[0], 60)
