@@ -6,9 +6,9 @@ A synthetic cardiac cycle of 12 frames made from the bundled end-diastole contou
 frame contracts the ventricle smoothly (more at the apex side than at the base) and back,
 and is resampled on its own, with a different node count and start, so that node ``i``
 of one frame is not node ``i`` of the next. :func:`modalmorph.track` follows the nodes of
-frame 0 through the sequence by morphing the tracked shape onto each next frame; its
-result gives the trajectories, strain energy per frame and the relative change of the
-contour's length (global and per segment), as ``modalmorph track frames/ --out DIR
+frame 0 through the sequence by morphing frame 0 onto each frame; its result gives the
+trajectories, the strain energy of each frame's morph from frame 0 and the relative change
+of the contour's length (global and per segment), as ``modalmorph track frames/ --out DIR
 --cycle`` writes them.
 """
 

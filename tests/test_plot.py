@@ -420,7 +420,7 @@ def fake_track(names=("frame_1", "frame_2", "frame_3")):
         points=morph.shapes, node_energy=morph.node_energy, frames=frames,
         names=tuple(names), n_frames=len(names), strain=strain,
         segment_strain=np.c_[strain, 0.5 * strain], cumulative_energy=np.arange(3.0),
-        shape=lambda f: frames[f])
+        source_frame=np.zeros(len(names), dtype=int), shape=lambda f: frames[f])
 
 
 def test_track_figures_name_the_frames_and_the_legend_hides_no_curve():

@@ -1,17 +1,19 @@
 """``track()``: the nodes of the first frame followed through a whole sequence.
 
 A sequence of observed objects (the left ventricle over the cardiac cycle, the sole of the
-foot over a step) is followed by morphing the tracked shape onto each next frame's
-observed contour (:func:`modalmorph.morph`, correspondence in the common frame of the
-images), so every frame keeps the node identities of frame 0 and the track does not drift
-away from the data. From the trajectories come the per-frame strain energy (22), (25) and
-the contour strain: the relative change of length of each stretch between nodes against
-frame 0 (for a closed left-ventricle contour, the circumferential strain).
+foot over a step) is followed by morphing frame 0 (or the tracked previous frame) onto
+each frame's observed contour (:func:`modalmorph.morph`, correspondence in the common
+frame of the images), so every frame keeps the node identities of frame 0 and the track
+does not drift away from the data. From the trajectories come the per-frame strain
+energy (22), (25) and the contour strain: the relative change of length of each stretch
+between nodes against frame 0 (for a closed left-ventricle contour, the circumferential
+strain).
 """
 
 from __future__ import annotations
 
 import logging
+import warnings
 from collections.abc import Callable, Sequence
 from contextlib import nullcontext
 from dataclasses import asdict, dataclass, field
@@ -43,6 +45,15 @@ __all__ = ["REFERENCES", "CORRESPONDENCES", "Track", "track",
 
 log = logging.getLogger(__name__)
 
+# A frame reached from frame 0 (reference="first") is redone from the tracked previous
+# frame when its morph did not converge, its contour crosses itself, or it lies farther
+# than this many of frame 0's node spacings from the observed contour (curve_distance).
+# Sound tracks of the corpus of benchmarks/track.py (hearts, pressure parts, warped
+# glyphs and horse) lie within 0.25 mean edge lengths (0.78 on a pressure part whose
+# morphs did not converge); wrong correspondences (nearest pairs on frames turned by
+# 90-180 degrees) 2-35.
+FIT_SPACINGS = 1.0
+
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -60,16 +71,26 @@ class Track:
     names : tuple of str
         A name per frame (file name, or ``"frame <i>"``), used in messages.
     morphs : tuple of Morph
-        ``F - 1`` morphs: ``morphs[f - 1]`` takes the tracked frame ``f - 1`` (or frame 0
-        with ``reference="first"``) onto frame ``f``'s observed object.
+        ``F - 1`` morphs: ``morphs[f - 1]`` takes the tracked frame ``source_frame[f]``
+        onto frame ``f``'s observed object.
+    source_frame : ndarray of int, shape (F,)
+        The frame each frame's morph started from: 0 with ``reference="first"`` (or
+        ``f - 1`` where the morph from frame 0 failed and the one from the tracked
+        previous frame was kept, see :func:`track`), ``f - 1`` with ``"previous"``; 0
+        for frame 0.
     energy : ndarray, shape (F,)
-        Strain energy ``U^T K U`` (22) at the end of each frame's morph (0 for frame 0),
-        in the morph's units (:class:`Morph`): with ``reference="previous"`` the energy
-        of the deformation from the previous frame, with ``"first"`` from frame 0.
+        Strain energy ``U^T K U`` (22) at the end of frame ``f``'s morph, in the morph's
+        units (:class:`Morph`): the energy of the deformation from the tracked frame
+        ``source_frame[f]`` to frame ``f`` (from frame 0 with ``"first"``, from frame
+        ``f - 1`` with ``"previous"``); 0 for frame 0.
     node_energy : ndarray, shape (F, m)
         The same per node (25).
     cumulative_energy : ndarray, shape (F,)
-        ``cumsum(energy)``: the energy spent along the sequence up to each frame.
+        Strain energy summed over the morphs that lead from frame 0 to frame ``f``
+        (``energy[f] + cumulative_energy[source_frame[f]]``): with ``"first"`` the one
+        morph from frame 0, so ``energy`` itself; with ``"previous"`` every step,
+        ``cumsum(energy)``. Defined the same way for both; the values differ (over a
+        cycle the steps add up while the morph from frame 0 returns to 0).
     edges : ndarray of int, shape (e, 2)
         The stretches between nodes whose strain is measured (:attr:`Shape.edges` of
         frame 0: the edges of each contour, or of a surface's triangles; none for point
@@ -111,6 +132,7 @@ class Track:
     frames: tuple
     names: tuple
     morphs: tuple
+    source_frame: np.ndarray
     energy: np.ndarray
     node_energy: np.ndarray
     cumulative_energy: np.ndarray
@@ -127,9 +149,9 @@ class Track:
 
     def __repr__(self) -> str:
         n_frames, m, d = self.points.shape
-        return (f"Track({n_frames} frames of {m} nodes in {d}D, total energy "
-                f"{float(self.energy.sum()):.4g}, strain {float(self.strain[-1]):+.3%} at "
-                f"the last frame)")
+        return (f"Track({n_frames} frames of {m} nodes in {d}D, strain "
+                f"{float(self.strain[-1]):+.3%} and strain energy from frame 0 "
+                f"{float(self.cumulative_energy[-1]):.4g} at the last frame)")
 
     @property
     def n_frames(self) -> int:
@@ -147,11 +169,19 @@ def track(frames, *, options: TrackOptions | None = None,
           progress: Callable[[int, int], None] | None = None, **overrides) -> Track:
     """Follow the nodes of frame 0 through a sequence of observed objects.
 
-    Frame ``f`` is reached by morphing the tracked frame ``f - 1`` (or frame 0) onto the
-    observed frame ``f`` (:func:`modalmorph.morph`): node ``i`` keeps its identity and
-    every frame is fitted to its own data (no drift away from the contours). With
-    ``reference="first"`` frame 0's model, modes and integrator are built once for every
-    frame (:func:`modalmorph.simulation.reuse_systems`).
+    Frame ``f`` is reached by morphing frame 0 (``reference="first"``, the default) or
+    the tracked frame ``f - 1`` (``"previous"``) onto the observed frame ``f``
+    (:func:`modalmorph.morph`): node ``i`` keeps its identity and every frame is fitted
+    to its own data (no drift away from the contours). With ``"first"`` frame 0's model,
+    modes and integrator are built once for every frame
+    (:func:`modalmorph.simulation.reuse_systems`), and a frame whose morph from frame 0
+    fails its own test (raises, does not converge, crosses itself, or, for contours,
+    ends farther than :data:`FIT_SPACINGS` node spacings from the observed contour) is
+    morphed from the tracked previous frame instead, kept when that one passes
+    (``source_frame`` says which; a warning says when neither passes). ``"nearest"``
+    pairs the objects centred and scaled to one size: it follows changes of size and
+    position, not a turn by more than about a node spacing from the frame a morph starts
+    from; for objects that turn, use ``correspondence="modal"`` (benchmarks/track.py).
 
     Parameters
     ----------
@@ -198,14 +228,14 @@ def track(frames, *, options: TrackOptions | None = None,
     # reference "first": every frame's morph starts from frame 0's model and integrator
     reuse = reuse_systems() if opts.reference == "first" else nullcontext()
     with limit(max(shape.m for shape in shapes)), reuse:
-        morphs = _follow(shapes, opts.reference, step, progress)
+        morphs, sources = _follow(shapes, names, opts.reference, step, progress)
         points = np.array([first.points, *[r.shapes[-1] for r in morphs]])
         closure = step(first.with_points(points[-1]), first, 0) if opts.cycle else None
     params = dict(asdict(opts), segments=opts.segments if first.ordered else 0,
                   start_node=int(opts.start_node),
                   match_options={} if match_opts is None else match_opts.record(),
                   morph=parameters(morphs[0]))
-    return _result(shapes, names, points, morphs, closure, params)
+    return _result(shapes, names, points, (morphs, sources), closure, params)
 
 
 def _track_options(options, overrides: dict) -> TrackOptions:
@@ -216,17 +246,56 @@ def _track_options(options, overrides: dict) -> TrackOptions:
     return options.replace(**overrides)
 
 
-def _follow(shapes, reference: str, step, progress) -> list:
-    """The morphs onto frames 1, 2, ...: each from the tracked previous frame (or frame
-    0), ``step(source, target, f)``."""
-    first, morphs = shapes[0], []
+def _follow(shapes, names, reference: str, step, progress) -> tuple[list, np.ndarray]:
+    """The morphs onto frames 1, 2, ... (``step(source, target, f)``) and the frame each
+    started from: the tracked previous frame, or with ``reference="first"`` frame 0,
+    unless that morph raised (then the one from the tracked previous frame, as with
+    "previous") or fails its own test (:func:`_sound`) and the one from the tracked
+    previous frame passes it (else it is kept, with a warning)."""
+    first, morphs, sources = shapes[0], [], [0]
     for f in range(1, len(shapes)):
-        source = first if reference == "first" or not morphs else \
-            first.with_points(morphs[-1].shapes[-1])
-        morphs.append(step(source, shapes[f], f))
+        previous = first if f == 1 else first.with_points(morphs[-1].shapes[-1])
+        result, source = None, f - 1
+        if reference == "first" and f > 1:
+            result, source = _attempt(step, first, shapes[f], f), 0
+        if result is None:
+            result, source = step(previous, shapes[f], f), f - 1
+        elif not _sound(result, first, shapes[f]):
+            again = _attempt(step, previous, shapes[f], f)
+            if again is not None and _sound(again, first, shapes[f]):
+                result, source = again, f - 1
+            else:
+                warnings.warn(f"frame {f} ({names[f]}): neither its morph from frame 0 nor "
+                              f"the one from frame {f - 1} converged, uncrossed, within "
+                              f"{FIT_SPACINGS:g} node spacing of it (kept the first; see "
+                              "Track.crossed and Track.distance): objects that turn need "
+                              "correspondence='modal'", stacklevel=3)
+        morphs.append(result)
+        sources.append(source)
         if progress is not None:
             progress(f, len(shapes))
-    return morphs
+    return morphs, np.array(sources)
+
+
+def _attempt(step, source: Shape, target: Shape, f: int) -> Morph | None:
+    """``step(source, target, f)``, or None (logged) when it raises."""
+    try:
+        return step(source, target, f)
+    except ValueError as exc:
+        log.info("%s", exc)
+        return None
+
+
+def _sound(result: Morph, first: Shape, observed: Shape) -> bool:
+    """A frame's morph that converged to a tracked shape that does not cross itself and,
+    for contours, lies within :data:`FIT_SPACINGS` of frame 0's node spacing of the
+    observed contour (surfaces and point sets: node to node distances depend on how
+    densely each frame is sampled, so no such test)."""
+    end = result.shapes[-1]
+    if not result.converged or _crosses_itself(end, first):
+        return False
+    return not (first.ordered and first.faces is None) or curve_distance(
+        first.with_points(end), observed) <= FIT_SPACINGS * first.spacing * first.size
 
 
 def _morph_frame(source: Shape, target: Shape, f: int, *, names: tuple,
@@ -299,10 +368,14 @@ def _frames(frames, names, start_node) -> tuple[list, tuple]:
     return shapes, names
 
 
-def _result(shapes, names, points, morphs, closure, params) -> Track:
-    """The Track: energies of the morphs, strains of the tracked edges, distances."""
-    first = shapes[0]
+def _result(shapes, names, points, runs, closure, params) -> Track:
+    """The Track: energies of the morphs (``runs``: the morphs and the frame each started
+    from), strains of the tracked edges, distances."""
+    first, (morphs, sources) = shapes[0], runs
     energy = np.r_[0.0, [r.energy[-1] for r in morphs]]
+    cumulative = np.zeros(len(energy))
+    for f in range(1, len(energy)):  # along the morphs that lead from frame 0 to frame f
+        cumulative[f] = energy[f] + cumulative[sources[f]]
     node_energy = np.vstack([np.zeros(first.m), *[r.node_energy[-1] for r in morphs]])
     edges = first.edges
     lengths = np.linalg.norm(points[:, edges[:, 1]] - points[:, edges[:, 0]], axis=2)
@@ -314,7 +387,8 @@ def _result(shapes, names, points, morphs, closure, params) -> Track:
         np.linalg.norm(closure.shapes[-1] - first.points, axis=1).mean())
     return Track(
         points=points, frames=tuple(shapes), names=names, morphs=tuple(morphs),
-        energy=energy, node_energy=node_energy, cumulative_energy=np.cumsum(energy),
+        source_frame=sources, energy=energy, node_energy=node_energy,
+        cumulative_energy=cumulative,
         edges=edges, edge_strain=lengths / lengths[0] - 1.0,
         strain=lengths.sum(axis=1) / lengths[0].sum() - 1.0 if len(edges) else
         np.zeros(len(points)),

@@ -182,7 +182,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "animation."))
     _track_parser(command("track", _run_track, "follow the nodes of the first frame through "
                           "a sequence", "Follow the nodes of the first frame through a "
-                          "sequence by morphing the tracked shape onto each next frame; "
+                          "sequence by morphing frame 0 (or the tracked previous frame) onto "
+                          "each frame; "
                           "write trajectories, strain energy and contour strain per frame, "
                           "figures and an animation."))
     strain.register(command, add_option_flags)

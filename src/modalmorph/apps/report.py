@@ -89,6 +89,19 @@ def input_images(source, target) -> dict:
             if image_size(path) is not None}
 
 
+def _track_energy_label(track) -> str:
+    """The chart's words for a track's ``energy``: each frame's morph from where it
+    started (frame 0, the previous frame, or either: ``track.source_frame``)."""
+    source = track.source_frame[1:]
+    if not source.any():
+        start = track.names[0]
+    elif np.array_equal(source, np.arange(len(source))):
+        start = "the previous frame"
+    else:
+        start = f"{track.names[0]} or the previous frame"
+    return f"strain energy of each frame's morph from {start} (k_ref L²)"
+
+
 def result_payload(result, *, title: str | None = None, images: dict | None = None) -> dict:
     """The viewer's JSON for a :class:`~modalmorph.Morph` or a :class:`~modalmorph.Track`.
 
@@ -117,8 +130,10 @@ def result_payload(result, *, title: str | None = None, images: dict | None = No
         ``parameters``, ``converged``,
         ``stop_reason``, ``modalmorph_version`` and ``y_up`` (coordinates not from an
         image or SVG: drawn with y up); for a morph also ``loads``
-        (T+1, m, d); for a track ``frames`` (the observed object of every frame) and
-        ``frame_contours``.
+        (T+1, m, d); for a track ``frames`` (the observed object of every frame),
+        ``frame_contours``, ``source_frame`` (the frame each frame's morph started from;
+        ``energy`` is that morph's) and ``energy_label`` (what ``energy`` is, for the
+        chart).
         Non-finite numbers are None.
     """
 
@@ -145,7 +160,8 @@ def result_payload(result, *, title: str | None = None, images: dict | None = No
         payload.update(
             mean_distance=_array(result.distance), frames=[_points(f) for f in result.frames],
             frame_contours=[_contours(f) for f in result.frames],
-            names=list(result.names), pairs=[], converged=True, distance=None,
+            names=list(result.names), source_frame=result.source_frame.tolist(),
+            energy_label=_track_energy_label(result), pairs=[], converged=True, distance=None,
             tolerance=None, stop_reason=f"{result.n_frames} frames of {shapes.shape[1]} nodes")
     else:
         first, last = result.source, result.target

@@ -89,9 +89,24 @@ def plot_trajectories(track, *, every: int = 1, background: bool = True, ax=None
     return ax
 
 
+def energy_labels(track) -> tuple[str, str]:
+    """(legend, axis label) of ``track.cumulative_energy``, the strain energy summed over
+    the morphs that lead from frame 0 to each frame, in the words of how the frames were
+    reached (``track.source_frame``): one morph from frame 0 each, a chain of
+    frame-to-frame morphs, or some of each."""
+    source = np.asarray(track.source_frame)[1:]
+    if not source.any():
+        return "energy from frame 0", "strain energy (22) of the morph from frame 0"
+    if np.array_equal(source, np.arange(len(source))):
+        return "energy summed frame to frame", "strain energy (22) summed frame to frame"
+    return ("energy from frame 0", "strain energy (22) from frame 0 (summed where a "
+            "frame came from the previous one)")
+
+
 def plot_track_curves(track, *, ax=None):
-    """Global strain (and each segment's) and cumulative strain energy over the frames:
-    strain on ``ax`` (left axis, in %), energy on a twin axis on the right.
+    """Global strain (and each segment's) and the strain energy of reaching each frame
+    from frame 0 (``track.cumulative_energy``, named by :func:`energy_labels`) over the
+    frames: strain on ``ax`` (left axis, in %), energy on a twin axis on the right.
 
     Returns the Axes of the strain."""
     import_matplotlib()
@@ -109,9 +124,10 @@ def plot_track_curves(track, *, ax=None):
         ax.tick_params(axis="x", labelrotation=30)
     ax.set_ylabel(f"strain against {track.names[0]} (%)")
     right = ax.twinx()
+    legend, label = energy_labels(track)
     right.plot(frames, track.cumulative_energy, color=TARGET_COLOR, ls="--", lw=1.5,
-               label="cumulative energy")
-    right.set_ylabel(f"cumulative strain energy (22) ({ENERGY_UNIT})", color=TARGET_COLOR)
+               label=legend)
+    right.set_ylabel(f"{label} ({ENERGY_UNIT})", color=TARGET_COLOR)
     handles = ax.get_legend_handles_labels()
     more = right.get_legend_handles_labels()
     legend_above(ax, handles[0] + more[0], handles[1] + more[1])  # hides no curve

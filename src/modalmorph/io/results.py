@@ -150,9 +150,15 @@ def save_track(track, out_dir, *, options: dict | None = None,
     """Write a :class:`modalmorph.Track` into ``out_dir``, one file at a time (wrap the
     call in :func:`atomic_output_dir` for all or nothing).
 
+    The energies are those of :class:`modalmorph.Track`: ``energy`` of frame ``f``'s
+    morph from the tracked frame ``source_frame`` (frame 0 with ``reference="first"``,
+    ``f - 1`` with ``"previous"``), ``cumulative_energy`` summed over the morphs that
+    lead from frame 0 to frame ``f`` (with ``"first"`` the one morph from frame 0).
+
     ``track.npz``
-        Arrays ``points`` (F, m, d) (the trajectories), ``energy``, ``cumulative_energy``,
-        ``strain``, ``distance`` (F,), ``node_energy`` (F, m), ``edges`` (e, 2),
+        Arrays ``points`` (F, m, d) (the trajectories), ``source_frame``, ``energy``,
+        ``cumulative_energy``, ``strain``, ``distance`` (F,), ``node_energy`` (F, m),
+        ``edges`` (e, 2),
         ``edge_strain`` (F, e), ``segment_strain`` (F, S), ``segment_of_edge`` (e,),
         ``crossed`` (F,).
     ``track.json``
@@ -160,7 +166,8 @@ def save_track(track, out_dir, *, options: dict | None = None,
         ``input_files`` (each file's ``path`` and ``sha256``, when given), ``options``
         (every option of the run by flat name, when given), ``nodes``,
         ``dim``, ``closure_error`` (or null) and ``frames``: per frame ``name``,
-        ``observed_nodes``, ``steps``, ``converged``, ``energy``, ``cumulative_energy``,
+        ``observed_nodes``, ``source_frame``, ``steps``, ``converged``, ``energy``,
+        ``cumulative_energy``,
         ``strain``, ``segment_strain``, ``distance``, ``crossed`` (frame 0: no morph,
         ``steps`` 0).
     ``strain_segments.csv``
@@ -173,6 +180,7 @@ def save_track(track, out_dir, *, options: dict | None = None,
         run = track.morphs[f - 1] if f else None
         frames.append({
             "name": track.names[f], "observed_nodes": int(track.frames[f].m),
+            "source_frame": int(track.source_frame[f]),
             "steps": run.steps if run else 0, "converged": bool(run.converged) if run else True,
             "energy": float(track.energy[f]),
             "cumulative_energy": float(track.cumulative_energy[f]),
@@ -189,7 +197,8 @@ def save_track(track, out_dir, *, options: dict | None = None,
         tmp.write_text(text + "\n", encoding="utf-8")
     with atomic_write(out_dir / "track.npz") as tmp:
         np.savez_compressed(
-            tmp, points=track.points, energy=track.energy, node_energy=track.node_energy,
+            tmp, points=track.points, source_frame=track.source_frame,
+            energy=track.energy, node_energy=track.node_energy,
             cumulative_energy=track.cumulative_energy, strain=track.strain,
             distance=track.distance, edges=track.edges, edge_strain=track.edge_strain,
             segment_strain=track.segment_strain, segment_of_edge=track.segment_of_edge,

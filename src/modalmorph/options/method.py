@@ -263,15 +263,16 @@ class TrackOptions(Options):
     """How :func:`modalmorph.track` follows a sequence."""
 
     reference: str = option(
-        "previous", "previous: morph each tracked frame onto the next (small steps); "
-        "first: morph frame 0 straight onto every frame", group="sequence", kind="str",
-        choices=REFERENCES)
+        "first", "first: morph frame 0 straight onto every frame (its model built once), "
+        "a frame whose morph fails (not converged, crossed, off the contour) from the "
+        "tracked previous frame; previous: morph each tracked frame onto the next",
+        group="sequence", kind="str", choices=REFERENCES)
     correspondence: str = option(
         "nearest", "nearest: in the frames' common frame each observed node pulls at most "
-        "one node, the nearest of those whose nearest it is (consecutive frames, motions "
-        "under the node spacing); normal: each node to where the normal of its contour "
+        "one node, the nearest of those whose nearest it is (both centred and scaled: "
+        "turns under the node spacing); normal: each node to where the normal of its contour "
         "meets the observed contour (2D contours; no sliding along the wall); modal: "
-        "modal matching (large motions between frames)",
+        "modal matching (large motions, objects that turn)",
         group="sequence", kind="str", choices=CORRESPONDENCES)
     cycle: bool = option(
         False, "periodic sequence (a cardiac cycle): also morph the last frame back onto "

@@ -56,7 +56,8 @@ class ItemResult:
     test: ``result.json``'s ``distance``, within ``tolerance`` when converged; empty for
     a sequence), ``frame_distance`` (a sequence's largest two-way distance of the tracked
     shape to a frame; empty for a pair), ``energy`` (final strain energy; a sequence's
-    cumulative energy),
+    ``cumulative_energy`` at its last frame: the energy of the morphs that reached it from
+    frame 0, the one morph from frame 0 with ``reference="first"``),
     ``strain_min``/``strain_max`` (a sequence's global contour strain), ``seconds``
     (wall time of the item in its worker, when computed now).
     """
