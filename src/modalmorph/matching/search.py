@@ -27,6 +27,10 @@ __all__ = ["SKIP", "REPEAT", "mutual_best", "plausible", "monotone_totals", "cyc
 SKIP = 16.0  # leaving a source node unmatched (not measured)
 REPEAT = 4.0  # one target for two consecutive source nodes, a denser source (not measured)
 _TRUST = 4.0  # pairs costing at most this are trusted for the fits (not measured)
+# The search runs within each row's candidate columns when they span at most this share of
+# the cost matrix (heart pairs: 0.6 at 70 nodes, 0.4-0.5 at 250, 0.1-0.4 at 1000, where it
+# takes the match from 265 to 190 ms; with wider spans the extra slicing costs more).
+_SPAN_SHARE = 0.5
 
 
 def mutual_best(Z: np.ndarray) -> np.ndarray:
@@ -85,6 +89,54 @@ def _forward(C: np.ndarray, skip: float, repeat: float, keep: bool):
     return F, (T if keep else None)
 
 
+def _candidate_span(C: np.ndarray, skip: float) -> tuple[np.ndarray, np.ndarray]:
+    """For every row of ``C`` (m, n) the first and last column whose cost is at most
+    ``skip`` (first > last where there is none). A pair costing more than ``skip`` is in
+    no optimal order-preserving matching (skipping its row instead is cheaper), and never
+    decides a running minimum of :func:`_rows_forward` either (with ``F`` non-increasing
+    along a row, it costs more than skipping the row does), so the search looks only
+    between these columns."""
+    mask = np.less_equal(C, skip)
+    n = C.shape[1]
+    first = np.where(mask.any(axis=1), mask.argmax(axis=1), n)
+    last = n - 1 - mask[:, ::-1].argmax(axis=1)
+    return first, last
+
+
+def _rows_forward(C: np.ndarray, skip: float, repeat: float, first, last):
+    """:func:`_forward` with ``keep`` for one problem (m, n), each row's work restricted to
+    its columns ``first[i]..last[i]`` (:func:`_candidate_span`); ``F`` is bitwise that of
+    :func:`_forward`, ``T`` only within those columns (elsewhere undefined). Before the
+    span a row's ``F`` is the row skipped, after it the smaller of that and the span's
+    minimum: a running minimum over the span alone (the slow part: 7 ns an element)."""
+    m, n = C.shape
+    F = np.empty((m + 1, n + 1))
+    T = np.empty((m, n))
+    F[0] = 0.0
+    F[1:, 0] = skip * np.arange(1, m + 1)
+    repeats = np.isfinite(repeat)
+    prev = np.empty(n)
+    add, minimum, running_min = np.add, np.minimum, np.minimum.accumulate
+    heads, tails = list(F[:, :-1]), list(F[:, 1:])  # F[i, j] and F[i, 1 + j]
+    for i, lo, hi in zip(range(m), first.tolist(), (last + 1).tolist(), strict=True):
+        Fa, Fn = tails[i], tails[i + 1]
+        add(Fa, skip, out=Fn)  # row i skipped
+        if lo >= hi:
+            continue
+        Ti, p = T[i, lo:hi], prev[lo:hi]
+        if repeats and i > 0:  # previous target < j, or == j at a price
+            add(Fa[lo:hi], repeat, out=p)
+            minimum(p, heads[i][lo:hi], out=p)
+            add(C[i, lo:hi], p, out=Ti)
+        else:  # previous target < j
+            add(C[i, lo:hi], heads[i][lo:hi], out=Ti)
+        running_min(Ti, out=p)
+        span, rest = Fn[lo:hi], Fn[hi:]
+        minimum(span, p, out=span)
+        minimum(rest, p[-1], out=rest)
+    return F, T
+
+
 def _monotone(C: np.ndarray, skip: float, repeat: float = np.inf
               ) -> tuple[np.ndarray, float]:
     """Order-preserving matching: ``j(i)`` non-decreasing in ``i``, each source node matched
@@ -92,18 +144,26 @@ def _monotone(C: np.ndarray, skip: float, repeat: float = np.inf
     nodes at the extra cost ``repeat`` (``inf``: one-to-one); minimal total cost.
 
     ``C`` has shape (m, n). Returns ``j`` (m,), -1 where the source node is unmatched, and
-    the total cost. The backtrack recomputes each decision on the one column it visits.
+    the total cost. The backtrack recomputes each decision on the one column it visits,
+    within the row's candidate columns (:func:`_candidate_span`).
     """
     m, n = C.shape
-    F, T = _forward(C, skip, repeat, keep=True)
+    first, last = _candidate_span(C, skip)
+    if np.maximum(last + 1 - first, 0).sum() <= _SPAN_SHARE * m * n:
+        F, T = _rows_forward(C, skip, repeat, first, last)
+    else:  # wide spans: whole rows, fewer operations a row
+        F, T = _forward(C, skip, repeat, keep=True)
     j = np.full(m, -1, np.intp)
     repeats = np.isfinite(repeat)
     cur = n - 1
     for i in range(m - 1, -1, -1):
         if cur < 0:
             break
+        lo, hi = int(first[i]), min(cur, int(last[i]))
+        if lo > hi:  # no candidate left of cur: row i skipped
+            continue
         Ti, Fi = T[i], F[i]
-        a = cur - int(Ti[cur::-1].argmin())  # last position of the minimum so far
+        a = hi - int(Ti[lo:hi + 1][::-1].argmin())  # last position of the minimum so far
         if Ti[a] < Fi[cur + 1] + skip:  # row i matched (else skipped)
             j[i] = a
             again = repeats and i > 0 and Fi[a + 1] + repeat < Fi[a]
