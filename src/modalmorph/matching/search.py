@@ -30,7 +30,7 @@ _TRUST = 4.0  # pairs costing at most this are trusted for the fits (not measure
 # The search runs within each row's candidate columns when they span at most this share of
 # the cost matrix (heart pairs: 0.6 at 70 nodes, 0.4-0.5 at 250, 0.1-0.4 at 1000, where it
 # takes the match from 265 to 190 ms; with wider spans the extra slicing costs more).
-_SPAN_SHARE = 0.5
+_SPAN_SHARE, _SPAN_MIN = 0.5, 256  # not below this many columns (70 nodes: 140, spans 0.6)
 
 
 def mutual_best(Z: np.ndarray) -> np.ndarray:
@@ -118,7 +118,8 @@ def _rows_forward(C: np.ndarray, skip: float, repeat: float, first, last):
     prev = np.empty(n)
     add, minimum, running_min = np.add, np.minimum, np.minimum.accumulate
     heads, tails = list(F[:, :-1]), list(F[:, 1:])  # F[i, j] and F[i, 1 + j]
-    for i, lo, hi in zip(range(m), first.tolist(), (last + 1).tolist(), strict=True):
+    for i, lo, hi in zip(range(m), first, last, strict=True):
+        hi += 1
         Fa, Fn = tails[i], tails[i + 1]
         add(Fa, skip, out=Fn)  # row i skipped
         if lo >= hi:
@@ -148,10 +149,15 @@ def _monotone(C: np.ndarray, skip: float, repeat: float = np.inf
     within the row's candidate columns (:func:`_candidate_span`).
     """
     m, n = C.shape
-    first, last = _candidate_span(C, skip)
-    if np.maximum(last + 1 - first, 0).sum() <= _SPAN_SHARE * m * n:
+    first, last, spans = [0] * m, [n - 1] * m, False
+    if n >= _SPAN_MIN:
+        lo, hi = _candidate_span(C, skip)
+        spans = np.maximum(hi + 1 - lo, 0).sum() <= _SPAN_SHARE * m * n
+        if spans:
+            first, last = lo.tolist(), hi.tolist()
+    if spans:
         F, T = _rows_forward(C, skip, repeat, first, last)
-    else:  # wide spans: whole rows, fewer operations a row
+    else:  # short or wide spans: whole rows, fewer operations a row
         F, T = _forward(C, skip, repeat, keep=True)
     j = np.full(m, -1, np.intp)
     repeats = np.isfinite(repeat)
@@ -159,11 +165,12 @@ def _monotone(C: np.ndarray, skip: float, repeat: float = np.inf
     for i in range(m - 1, -1, -1):
         if cur < 0:
             break
-        lo, hi = int(first[i]), min(cur, int(last[i]))
+        lo, hi = first[i], last[i] if last[i] < cur else cur
         if lo > hi:  # no candidate left of cur: row i skipped
             continue
         Ti, Fi = T[i], F[i]
-        a = hi - int(Ti[lo:hi + 1][::-1].argmin())  # last position of the minimum so far
+        left = Ti[hi::-1] if lo == 0 else Ti[hi:lo - 1:-1]
+        a = hi - int(left.argmin())  # last position of the minimum so far
         if Ti[a] < Fi[cur + 1] + skip:  # row i matched (else skipped)
             j[i] = a
             again = repeats and i > 0 and Fi[a + 1] + repeat < Fi[a]
@@ -248,13 +255,34 @@ class Costs:
     many: bool = False
 
 
+def _placed_costs(costs: Costs, x: np.ndarray, rows: np.ndarray):
+    """``sq_dist(x, y) / h2 + F[rows]`` (m, n), bitwise, written in place into the first
+    half of an (m, 2n) array whose second half repeats it for a closed target
+    (:func:`cyclic`): fewer passes over m x n arrays. Returns the cost and the array
+    searched (the same for an open target)."""
+    y, n = costs.y, len(costs.y)
+    out = np.empty((len(x), 2 * n if costs.closed else n))
+    C = out[:, :n]
+    np.add(np.sum(x**2, axis=1)[:, None], np.sum(y**2, axis=1)[None, :], out=C)
+    C -= 2 * x @ y.T  # as features.sq_dist
+    np.maximum(C, 0.0, out=C)
+    C /= costs.h2
+    C += costs.F if len(rows) == len(costs.F) else costs.F[rows]  # every node, in order
+    if costs.closed:
+        out[:, n:] = C
+    return C, out
+
+
 def pairs_at(costs: Costs, z: np.ndarray, rows: np.ndarray):
-    """Pairs (row index, target index) for the source nodes ``rows`` placed at ``z``, and
-    the cost matrix: order-preserving for contours, an assignment for point sets."""
-    C = sq_dist(z[rows], costs.y) / costs.h2 + costs.F[rows]
+    """Pairs (row index, target index) for the source nodes ``rows`` (distinct, ascending)
+    placed at ``z``, and the cost matrix: order-preserving for contours, an assignment for
+    point sets."""
     if costs.ordered:
-        j, _ = ordered_pairs(C, costs.closed, SKIP, costs.repeat)
+        C, doubled = _placed_costs(costs, z[rows], rows)
+        j, _ = _monotone(doubled, SKIP, costs.repeat)
+        j = np.where(j >= 0, j % C.shape[1], -1)
         return _pairs_from_j(j, C, one_to_one=not costs.many), C
+    C = sq_dist(z[rows], costs.y) / costs.h2 + costs.F[rows]
     r, c = linear_sum_assignment(C)
     return np.c_[r, c], C
 
