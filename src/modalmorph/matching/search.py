@@ -55,7 +55,8 @@ def _forward(C: np.ndarray, skip: float, repeat: float, keep: bool):
     Returns ``(F, T)``: ``F[i, ..., 1 + j]`` is the best cost of rows < i whose last
     target is <= j (``F[i, ..., 0]``: every one of them skipped) and ``T[i, ..., j]`` the
     best cost of rows <= i with row i matched to j. Within a row the best predecessor is a
-    running minimum (``np.minimum.accumulate``): four vectorised O(n) operations per row
+    running minimum (``np.fmin.accumulate``, for finite costs the same as ``minimum`` and
+    faster on 500-2000 columns): four vectorised O(n) operations per row
     (six with ``repeat``), on views sliced once. With ``keep=False`` only two rows of
     ``F`` are kept (the last is ``F[m % 2]``) and ``T`` is None.
     """
@@ -71,7 +72,7 @@ def _forward(C: np.ndarray, skip: float, repeat: float, keep: bool):
     rows = list(np.moveaxis(C, -2, 0))
     heads, tails = list(F[..., :-1]), list(F[..., 1:])  # F[i, ..., j] and F[i, ..., 1 + j]
     Ts, firsts = (list(T), None) if keep else ([T[0]] * m, list(F[..., :1]))
-    add, minimum, running_min = np.add, np.minimum, np.minimum.accumulate
+    add, minimum, running_min = np.add, np.minimum, np.fmin.accumulate
     for i in range(m):
         a, b = (i, i + 1) if keep else (i % 2, 1 - i % 2)
         Ti, Fn, Fa = Ts[i], tails[b], tails[a]
@@ -116,7 +117,7 @@ def _rows_forward(C: np.ndarray, skip: float, repeat: float, first, last):
     F[1:, 0] = skip * np.arange(1, m + 1)
     repeats = np.isfinite(repeat)
     prev = np.empty(n)
-    add, minimum, running_min = np.add, np.minimum, np.minimum.accumulate
+    add, minimum, running_min = np.add, np.minimum, np.fmin.accumulate
     heads, tails = list(F[:, :-1]), list(F[:, 1:])  # F[i, j] and F[i, 1 + j]
     for i, lo, hi in zip(range(m), first, last, strict=True):
         hi += 1
