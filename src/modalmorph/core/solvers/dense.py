@@ -57,7 +57,9 @@ def _whiten(K: np.ndarray, Linv: np.ndarray, d: int, m: int) -> np.ndarray:
                                               lower=1, trans_a=1)
     for a in range(d):  # left factor: L^-1 times the rows of block a
         Kw[a * m:(a + 1) * m] = blas.dtrmm(1.0, Linv, Kw[a * m:(a + 1) * m], lower=1)
-    return (Kw + Kw.T) / 2
+    out = Kw + Kw.T  # exactly symmetric: its transpose, in LAPACK's (Fortran) order, is it
+    out /= 2
+    return out.T
 
 
 def _eigh_lowest(A: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
