@@ -230,7 +230,7 @@ def _untangle(t: np.ndarray, cost: np.ndarray, n: int, skip: float, strict: bool
 
 def _pairs_from_j(j: np.ndarray, cost: np.ndarray, one_to_one: bool) -> np.ndarray:
     i = np.flatnonzero(j >= 0)
-    pairs = np.c_[i, j[i]]
+    pairs = np.stack([i, j[i]], axis=1)  # np.c_ costs 10 us more a call
     if one_to_one and len(pairs):  # a cyclic search may reuse a target once across the cut
         order = np.argsort(cost[pairs[:, 0], pairs[:, 1]], kind="stable")
         _, first = np.unique(pairs[order, 1], return_index=True)
@@ -300,7 +300,8 @@ def trusted_pairs(costs: Costs, z: np.ndarray, sub: np.ndarray):
     target index) and the total cost of all pairs."""
     pairs, C = pairs_at(costs, z, sub)
     cost = C[pairs[:, 0], pairs[:, 1]]
-    return _trusted(np.c_[sub[pairs[:, 0]], pairs[:, 1]], cost, z.shape[1]), cost.sum()
+    rows = np.stack([sub[pairs[:, 0]], pairs[:, 1]], axis=1)
+    return _trusted(rows, cost, z.shape[1]), cost.sum()
 
 
 def total(found: tuple, m: int) -> float:
