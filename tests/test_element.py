@@ -158,3 +158,19 @@ def test_polyethylene_preset():
     E, nu = POLYETHYLENE.E, POLYETHYLENE.nu
     assert_allclose(lam_star, E * nu / (1 - nu**2))  # plane stress lambda*
     assert_allclose(mu, E / (2 * (1 + nu)))
+
+
+@pytest.mark.parametrize("sigma", [1.0, 2.0])
+def test_condition_bound_is_an_upper_bound(hand200, sigma):
+    """condition_bound, which lets the dense solver skip Gamma's eigenvalues, is never
+    below Gamma's condition number, and within the node count of it."""
+    from scipy.linalg import lapack
+
+    from modalmorph.core.element import condition_bound
+    model = FEModel(hand200, sigma=sigma)
+    gamma = model.gram[1]
+    L, info = lapack.dpotrf(gamma, lower=1, clean=1)
+    l_inv, info2 = lapack.dtrtri(L, lower=1)
+    assert info == info2 == 0
+    bound = condition_bound(gamma, l_inv)
+    assert model.gamma_condition * (1 - 1e-9) <= bound <= model.m * model.gamma_condition

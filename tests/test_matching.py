@@ -230,6 +230,30 @@ def test_monotone_search_is_optimal():
                                        rtol=0, atol=1e-12)
 
 
+
+def test_search_within_candidate_spans_is_the_whole_search(monkeypatch):
+    """The search restricted to each row's columns costing at most ``skip`` (the default
+    from 256 columns) finds the very pairs and total of the whole-row search, bit for bit:
+    random costs with ties, doubled (cyclic) targets, repeats, and banded costs like a
+    placed contour's."""
+    from modalmorph.matching import search
+    rng = np.random.default_rng(5)
+    problems = []
+    for t in range(300):
+        m, n = rng.integers(1, 30), rng.integers(1, 40)
+        C = (np.round(rng.random((m, n)) * 24) if t % 3 == 0 else rng.random((m, n)) * 40
+             if t % 3 == 1 else (np.arange(m)[:, None] * n / m - np.arange(n)) ** 2 / 4
+             + rng.random((m, n)) * 3)
+        problems.append((np.concatenate([C, C], axis=1) if t % 2 else C,
+                         (16.0, 4.0, 0.5)[t % 3], (np.inf, 4.0)[t // 3 % 2]))
+    whole = [_monotone(C, skip, repeat) for C, skip, repeat in problems]
+    monkeypatch.setattr(search, "_SPAN_MIN", 1)  # every problem within its spans
+    monkeypatch.setattr(search, "_SPAN_SHARE", 2.0)
+    for (C, skip, repeat), (j, total) in zip(problems, whole, strict=True):
+        j_span, total_span = _monotone(C, skip, repeat)
+        assert_array_equal(j_span, j)
+        assert total_span == total
+
 def test_point_set_pose_among_four():
     """An asymmetric blob and a bent, twisted, rotated, shuffled copy (the scale
     benchmark's 3D pair at 2000 nodes): on the coarse pose test alone a pose 180 degrees

@@ -203,12 +203,13 @@ def _rotation(cl: np.ndarray, cr: np.ndarray) -> np.ndarray:
     """Horn's rotation (d, d) between centred corresponding points (k, d)."""
     k, d = cl.shape
     if d == 2:  # embed with z = 0
-        cl3, cr3 = np.c_[cl, np.zeros(k)], np.c_[cr, np.zeros(k)]
+        z = np.zeros((k, 1))
+        cl3, cr3 = np.concatenate([cl, z], axis=1), np.concatenate([cr, z], axis=1)
     else:
         cl3, cr3 = cl, cr
     N = _quaternion_matrix(cl3.T @ cr3)  # S_ab = sum l_a r_b
     if d == 2:  # rotations about z only: quaternions (q0, 0, 0, qz); no reflections
-        sub = N[np.ix_([0, 3], [0, 3])]
+        sub = np.array([[N[0, 0], N[0, 3]], [N[3, 0], N[3, 3]]])
         _, vec = np.linalg.eigh(sub)
         q = np.array([vec[0, -1], 0.0, 0.0, vec[1, -1]])
     else:

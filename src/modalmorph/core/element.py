@@ -19,6 +19,7 @@ interacts with a bounded number of others.
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import lapack
 
 from ..errors import ModelError, OptionError
 from .shape import as_shape
@@ -27,7 +28,7 @@ __all__ = ["DEFAULT_SIGMA", "AUTO_CONDITION", "MAX_CONDITION", "MIN_SIGMA", "MAX
            "DEFAULT_CUTOFF", "AUTO_DENSE_MAX_DOF", "auto_sigma", "check_sigma",
            "cutoff_radius", "gaussian", "gram_entries", "squared_norms", "stiffness_entries",
            "stiffness_components", "stiffness_component_pairs", "self_entries",
-           "gaussian_from_overlap",
+           "gaussian_from_overlap", "condition_bound",
            "auto_sigma_condition", "singular_gram"]
 
 # sigma in units of the mean nearest-neighbour spacing; chosen by measurement, see README.
@@ -195,6 +196,27 @@ def _log_condition(r2: np.ndarray, sigma: float) -> float:
     return float(min(np.log10(ev[-1] / ev[0]), 17.0)) if ev[0] > 0 else 17.0
 
 
+def condition_bound(gamma: np.ndarray, l_inv: np.ndarray) -> float:
+    """An upper bound of the condition number of a Gram matrix ``Gamma`` (positive
+    entries) from the inverse ``l_inv`` of its lower Cholesky factor: its largest
+    eigenvalue is at most its largest row sum (Gershgorin), its smallest at least
+    ``1 / trace(Gamma^-1) = 1 / |L^-1|_F^2``. Within 1-40x of the condition number on
+    hearts and glyphs of 70-400 nodes at 1 and 2 spacings (cheaper than the eigenvalues:
+    a factor and a triangular inverse)."""
+    with np.errstate(over="ignore"):  # inf: no bound
+        return float(gamma.sum(axis=1).max() * np.einsum("ij,ij->", l_inv, l_inv))
+
+
+def _condition_below(r2: np.ndarray, sigma: float, log_limit: float) -> bool:
+    """Whether :func:`condition_bound` shows the condition number of ``Gamma`` at
+    ``sigma`` to be at most ``10^log_limit`` (False when it cannot)."""
+    gamma = _overlap(r2, sigma, d=0)
+    L, info = lapack.dpotrf(gamma, lower=1, clean=1)
+    if info == 0:
+        L, info = lapack.dtrtri(L, lower=1, overwrite_c=1)
+    return info == 0 and condition_bound(gamma, L) <= 10.0**log_limit
+
+
 def auto_sigma(shape, nominal: float = DEFAULT_SIGMA) -> float:
     """The Gaussian width (x mean node spacing) used when ``sigma=None``.
 
@@ -210,13 +232,16 @@ def auto_sigma(shape, nominal: float = DEFAULT_SIGMA) -> float:
 
 def auto_sigma_condition(shape, nominal: float = DEFAULT_SIGMA) -> tuple[float, float | None]:
     """:func:`auto_sigma` and log10 of Gamma's condition number there (None when not
-    computed: objects too large for a dense Gram matrix)."""
+    computed: objects too large for a dense Gram matrix, or ``nominal`` shown well
+    conditioned by :func:`condition_bound`)."""
     shape = as_shape(shape)
     if shape.dim * shape.m > AUTO_DENSE_MAX_DOF:
         return float(nominal), None
     x = shape.normalized
     r2 = np.maximum(np.sum(x**2, 1)[:, None] + np.sum(x**2, 1)[None, :] - 2 * x @ x.T, 0.0)
     h, target = shape.spacing, np.log10(AUTO_CONDITION)
+    if _condition_below(r2, nominal * h, target):  # no eigenvalues needed
+        return float(nominal), None
     hi, c_hi = float(nominal), _log_condition(r2, nominal * h)
     if c_hi <= target:
         return hi, c_hi
