@@ -12,11 +12,12 @@ import numpy as np
 from scipy import sparse
 from scipy.spatial import cKDTree
 
+from ..core.affine import affine_fit_weights
 from ..core.model import FEModel
 from ..core.modes import Modes
 from ..errors import OptionError
 
-__all__ = ["AFFINE_NEIGHBOURS", "AFFINE_RIDGE", "COARSE_MAX", "Field", "SPARSE_MODES",
+__all__ = ["AFFINE_NEIGHBOURS", "COARSE_MAX", "Field", "SPARSE_MODES",
            "affine_weights", "flat", "mode_count", "nodes", "similarity_fields",
            "smooth_fields", "superposed_modes"]
 
@@ -28,7 +29,6 @@ COARSE_MAX = 400  # nodes of the coarse copy whose modes augment a truncated bas
 # and 6e-4 sizes at worst (the element's field: 0.17 and 0.31), a 25 % warp to 0.02 (12
 # and 24 neighbours: the same to 0.003).
 AFFINE_NEIGHBOURS = 16
-AFFINE_RIDGE = 1e-4  # the fit's gradient damped by this (width units): nodes nearly flat
 
 
 def flat(P: np.ndarray) -> np.ndarray:
@@ -100,21 +100,14 @@ def affine_weights(model_points: np.ndarray, points: np.ndarray, width: float):
     """The sparse (p, mc) weights ``W`` that take a reduced model's nodal displacements
     (mc, d) to ``points`` (p, d), ``u = W U``: at each point, the least-squares affine
     fit of its ``AFFINE_NEIGHBOURS`` nearest model nodes, weighted by a Gaussian of
-    ``width``, evaluated there (moving least squares). Every affine motion, rigid ones
-    included, is reproduced (to ``AFFINE_RIDGE``); unlike the element's field (1)-(4),
-    which ripples between its nodes (method.md §7)."""
-    p, d = points.shape
+    ``width``, evaluated there (moving least squares,
+    :func:`~modalmorph.core.affine.affine_fit_weights`). Every affine motion, rigid ones
+    included, is reproduced; unlike the element's field (1)-(4), which ripples between
+    its nodes (method.md §7)."""
+    p = len(points)
     k = min(AFFINE_NEIGHBOURS, len(model_points))
-    dist, idx = cKDTree(model_points).query(points, k=k)
-    dist, idx = dist.reshape(p, k), idx.reshape(p, k)
-    w = np.exp(-0.5 * (dist / width) ** 2)
-    w /= w.sum(axis=1, keepdims=True)
-    P = np.concatenate([np.ones((p, k, 1)), (model_points[idx] - points[:, None]) / width],
-                       axis=2)  # the affine basis [1, x - p] at the neighbours
-    A = np.einsum("pk,pki,pkj->pij", w, P, P)
-    A[:, 1:, 1:] += AFFINE_RIDGE * np.eye(d)
-    c = np.linalg.solve(A, np.broadcast_to(np.eye(d + 1)[0], (p, d + 1))[..., None])[..., 0]
-    rows = w * np.einsum("pki,pi->pk", P, c)  # e_0^T A^-1 P^T diag(w)
+    idx = cKDTree(model_points).query(points, k=k)[1].reshape(p, k)
+    rows = affine_fit_weights(model_points[idx], points, width)
     return sparse.csr_array((rows.ravel(), (np.repeat(np.arange(p), k), idx.ravel())),
                             shape=(p, len(model_points)))
 
