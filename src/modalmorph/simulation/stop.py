@@ -20,13 +20,18 @@ from ..core.quality import Polyline
 from ..core.shape import Shape, even_subset, resample
 from ..options import MorphOptions
 
-__all__ = ["ContourStop", "CurveStop", "LAZY_SPACINGS", "Limits", "PLANE", "PairStop",
-           "QUADRIC_RIDGE", "STALL",
-           "STALL_GAIN", "StopTest", "SurfaceStop", "choose_stop_test", "to_surface"]
+__all__ = ["COARSE_FLOOR", "ContourStop", "CurveStop", "LAZY_SPACINGS", "Limits", "PLANE",
+           "PairStop", "QUADRIC_RIDGE", "STALL", "STALL_GAIN", "StopTest", "SurfaceStop",
+           "choose_stop_test", "to_surface"]
 
 STALL = 5  # steps over which a stalled distance means equilibrium (method.md §5)
 STALL_GAIN = 1e-3  # the least relative gain of the pulled pairs' distance over STALL steps
 PLANE = 12  # nearest points whose least-squares quadric is the surface (method.md §5)
+# A target whose own roughness (floor) exceeds this many tolerances is too coarse for its
+# surface to be measured alone: floors at the default tolerance 0.005, the bunny of 1839
+# and 900 vertices 1.3 and 2.6, an ellipsoid (2, 1, 0.5) of 162 vertices 3.0, one of 42
+# 14 and 61, tori of 72 and 128 points 57 and 29 (method.md §5).
+COARSE_FLOOR = 5
 QUADRIC_RIDGE = 1e-3  # the quadric's curvature damped by this, per point (method.md §5)
 LAZY_SPACINGS = 4  # surfaces measured within the tolerance plus this many spacings (§5)
 
@@ -163,11 +168,10 @@ class SurfaceStop(StopTest):
     cannot follow the target more closely than ``m`` points spread over it do: the
     target's distance to the shape's surface is measured less ``coarse``, what such a
     sample (:func:`even_subset`) leaves beyond ``floor``. A target so coarse that its
-    ``floor`` exceeds the tolerance (a torus of 72 points, an icosahedron of 42: 0.28 and
-    0.07 sizes) hides any distance below it: the mean distance of the pulled pairs,
-    ``near``, then counts too (``pairs``). With ``lazy`` the surfaces are measured only
-    once ``near`` is within ``gate``, the tolerance plus ``LAZY_SPACINGS`` target
-    spacings."""
+    ``floor`` exceeds ``COARSE_FLOOR`` tolerances hides any distance below it: the mean
+    distance of the pulled pairs, ``near``, then counts too (``pairs``). With ``lazy``
+    the surfaces are measured only once ``near`` is within ``gate``, the tolerance plus
+    ``LAZY_SPACINGS`` target spacings."""
 
     lazy = True
 
@@ -183,7 +187,7 @@ class SurfaceStop(StopTest):
             sample = target[even_subset(target, m)]
             left = float(to_surface(target, sample, cKDTree(sample)).mean())
             self.coarse = max(left - self.floor, 0.0)
-        self.pairs = self.floor > limits.tolerance  # too coarse to be measured alone
+        self.pairs = self.floor > COARSE_FLOOR * limits.tolerance  # too coarse alone
 
     def distance(self, current: np.ndarray, near: float, lazy: bool = True) -> float:
         if lazy and near > self.gate:
