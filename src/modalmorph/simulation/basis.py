@@ -29,6 +29,7 @@ COARSE_MAX = 400  # nodes of the coarse copy whose modes augment a truncated bas
 # and 6e-4 sizes at worst (the element's field: 0.17 and 0.31), a 25 % warp to 0.02 (12
 # and 24 neighbours: the same to 0.003).
 AFFINE_NEIGHBOURS = 16
+AFFINE_BLOCK = 1 << 16  # points fitted at once: about 100 MB of work arrays a block
 
 
 def flat(P: np.ndarray) -> np.ndarray:
@@ -107,7 +108,9 @@ def affine_weights(model_points: np.ndarray, points: np.ndarray, width: float):
     p = len(points)
     k = min(AFFINE_NEIGHBOURS, len(model_points))
     idx = cKDTree(model_points).query(points, k=k)[1].reshape(p, k)
-    rows = affine_fit_weights(model_points[idx], points, width)
+    rows = np.concatenate([affine_fit_weights(model_points[idx[b:b + AFFINE_BLOCK]],
+                                              points[b:b + AFFINE_BLOCK], width)
+                           for b in range(0, p, AFFINE_BLOCK)])
     return sparse.csr_array((rows.ravel(), (np.repeat(np.arange(p), k), idx.ravel())),
                             shape=(p, len(model_points)))
 

@@ -34,10 +34,11 @@ from .basis import (
 )
 from .result import Resolved
 
-__all__ = ["ModalSystem", "RANK_TOL", "reuse_systems", "several", "damping_matrix",
+__all__ = ["FIT_JITTER", "ModalSystem", "RANK_TOL", "reuse_systems", "several", "damping_matrix",
            "elastic_stiffness", "frequency_range", "similarity_free", "springs"]
 
 RANK_TOL = 1e-10  # similarity fields whose modal image is below this fraction are dependent
+FIT_JITTER = 1e-12  # relative lift of Phi^T Phi's diagonal (rounding: 1e-16 x its mean)
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -202,7 +203,7 @@ def _source_part(source: Shape, o: MorphOptions) -> dict:
     fitted = o.loads == "consistent" and spread is not None and model.dim == 3
     kappa, spring = springs(field, k_abs, consistent=o.loads == "consistent"
                             and (spread is None or fitted))
-    fit = linalg.cho_factor(field.gram()) if fitted else None
+    fit = _gram_factor(field) if fitted else None
     K_mod = stiffness + (spring if o.scheme == "implicit" else 0.0)
     uniform = kappa is not None and o.scheme == "implicit"  # K_mod = K_el + kappa I
     newmark = Newmark(K_mod, damping_matrix(o.damping, K_mod, spring, uniform=uniform),
@@ -276,6 +277,14 @@ def _nodal_field(model: FEModel, modes: Modes, points: np.ndarray, reduced: bool
     if model.dim == 3:
         return Field(modes.shapes, 3, affine_weights(model.points, points, model.width)), spread
     return Field(modes.gaussian, model.dim, g_eval), spread
+
+
+def _gram_factor(field: Field) -> tuple:
+    """The Cholesky factor of ``Phi^T Phi``, its diagonal lifted by ``FIT_JITTER`` of its
+    mean (a mode nearly invisible at the nodes would make it singular)."""
+    gram = field.gram()
+    gram.flat[::len(gram) + 1] += FIT_JITTER * np.trace(gram) / len(gram)
+    return linalg.cho_factor(gram)
 
 
 def elastic_stiffness(modes: Modes, mass_modes: np.ndarray, points: np.ndarray,
