@@ -13,7 +13,12 @@ onto finer or coarser turned ellipsoids, radii (1.3, 1, 0.8) or as named; the bu
 turned; the bone, cow and airplane scans that pymeshlab ships with its tests (GPL-3:
 read from the installed package at run time, never copied), warped and turned; the
 surface of scikit-image's 3D binary blobs (the largest blob, ``marching_cubes``,
-4 voxels a step), warped and turned. ``--cases`` picks some by name (substrings).
+4 voxels a step), warped and turned. ``--cases`` picks some by name (substrings),
+``--model-nodes`` sets the reduced model's size.
+
+``--resolutions`` morphs icospheres onto turned ellipsoids at other resolutions (42-2562
+vertices, radii (1.3, 1, 0.8), (1.5, 1, 0.7), (2, 1, 0.5)) with the true pairs and the
+matcher's.
 
 Distances are mean nearest-point distances in % of the target's RMS radius ("size"): one
 target node spacing is about 4 % of the size at 2000 points and 1.3 % at 20 000, and with
@@ -151,9 +156,34 @@ def mesh_cases():
     return cases
 
 
-def run_surface(name, src, tgt):
+def resolution_grid():
+    """Icospheres onto turned ellipsoids at other resolutions (42-2562 vertices; the
+    coarser one's vertices are the first of the finer's, so the true pairs are known),
+    with the true pairs and the matcher's: steps, why it stopped, d/tol, the largest
+    count of self-intersecting faces."""
+    import trimesh
+    from scipy.spatial.transform import Rotation
+
+    ico = {s: trimesh.creation.icosphere(s) for s in (1, 2, 3, 4)}
+    turn = Rotation.from_rotvec([0.3, -0.5, 0.4])
+    print(f"{'source':>6} {'target':>6} {'radii':>14} {'pairs':>7} {'stop':>11} "
+          f"{'steps':>5} {'d/tol':>6} {'max':>5}")
+    for a, b in ((3, 2), (4, 2), (3, 1), (2, 3), (2, 4)):
+        for radii in ((1.3, 1, 0.8), (1.5, 1, 0.7), (2, 1, 0.5)):
+            va, vb = np.asarray(ico[a].vertices), np.asarray(ico[b].vertices)
+            n = min(len(va), len(vb))
+            src = mm.Shape(va, faces=np.asarray(ico[a].faces))
+            tgt = mm.Shape(turn.apply(vb * radii), faces=np.asarray(ico[b].faces))
+            for name, pairs in (("true", np.c_[np.arange(n), np.arange(n)]), ("matcher", None)):
+                r = mm.morph(src, tgt, matching=pairs)
+                crossed = "-" if r.self_intersections is None else r.self_intersections.max()
+                print(f"{src.m:6d} {tgt.m:6d} {str(radii):>14} {name:>7} {r.stop_reason:>11} "
+                      f"{r.steps:5d} {r.distance / r.tolerance:6.2f} {crossed:>5}", flush=True)
+
+
+def run_surface(name, src, tgt, **options):
     start = time.perf_counter()
-    result = mm.morph(src, tgt)
+    result = mm.morph(src, tgt, **options)
     seconds = time.perf_counter() - start
     counts = result.self_intersections
     if counts is None:
@@ -169,6 +199,11 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--surfaces", action="store_true",
                         help="the mesh cases, with self-intersections per step")
+    parser.add_argument("--resolutions", action="store_true",
+                        help="icospheres onto ellipsoids at other resolutions, true and "
+                        "matcher pairs")
+    parser.add_argument("--model-nodes", type=int, default=None,
+                        help="with --surfaces: the morphs' model_nodes (default: theirs)")
     parser.add_argument("--cases", nargs="+", default=None,
                         help="with --surfaces: only the cases whose names contain these")
     parser.add_argument("--shape", default="blob", choices=("blob", "bunny"))
@@ -177,13 +212,17 @@ def main():
     parser.add_argument("--noise", type=float, nargs="+", default=[0.0, 0.01])
     parser.add_argument("--pairs", default="matcher", choices=("matcher", "true"))
     args = parser.parse_args()
+    if args.resolutions:
+        resolution_grid()
+        return
     if args.surfaces:
         print(f"{'case':>20} {'source':>6} {'target':>6} {'steps':>5} {'conv':>5} "
               f"{'d/tol':>6} {'time s':>6}  {'max':>5} {'steps':>5}  self-intersecting "
               f"faces per step")
         for case in surface_cases() + mesh_cases():
             if args.cases is None or any(c in case[0] for c in args.cases):
-                run_surface(*case)
+                run_surface(*case, **({} if args.model_nodes is None
+                                      else {"model_nodes": args.model_nodes}))
         return
     print(" shape  points angle noise    pairs steps  conv  end->t%  t->end%  time s")
     for m in args.points:
