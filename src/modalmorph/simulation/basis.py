@@ -119,8 +119,9 @@ class Field:
     """The modes at every node, ``Phi = (I_d kron g) B``, applied without forming Phi.
 
     ``B`` (d*mc, n) is the modal basis at the model's nodes (``Phi`` itself, then ``g`` is
-    None) or in the Gaussian basis (``psi``, with ``g`` the sparse (m, mc) field matrix of a
-    reduced model, :meth:`FEModel.field`). Memory stays that of ``g`` and ``B``.
+    None, or for a reduced 3D model ``g`` is the sparse (m, mc) :func:`affine_weights`) or
+    in the Gaussian basis (``psi``, with ``g`` the sparse (m, mc) field matrix of a reduced
+    2D model, :meth:`FEModel.field`). Memory stays that of ``g`` and ``B``.
     """
 
     def __init__(self, basis: np.ndarray, d: int, g=None):
