@@ -247,7 +247,8 @@ class LoadTargets:
         D = np.linalg.norm(self.source[nodes, None, :] - near, axis=2)
         if self.source.shape[1] != 3 or cand.shape[1] < 4:
             return _weighted_mean(D, disp)
-        w = affine_fit_weights(near, self.source[nodes], D.mean(axis=1))
+        w = affine_fit_weights(near, self.source[nodes],
+                               np.maximum(D.mean(axis=1), np.finfo(float).tiny))
         return np.einsum("bk,bkd->bd", w, disp)
 
     def _ends(self, nodes: np.ndarray, midx: np.ndarray) -> list:

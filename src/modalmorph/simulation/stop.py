@@ -21,8 +21,8 @@ from ..core.shape import Shape, even_subset, resample
 from ..options import MorphOptions
 
 __all__ = ["COARSE_FLOOR", "ContourStop", "CurveStop", "LAZY_SPACINGS", "Limits", "PLANE",
-           "PairStop", "QUADRIC_RIDGE", "STALL", "STALL_GAIN", "StopTest", "SurfaceStop",
-           "choose_stop_test", "to_surface"]
+           "PairStop", "QUADRIC_RIDGE", "STALL", "STALL_GAIN", "SURFACE_BLOCK", "StopTest",
+           "SurfaceStop", "choose_stop_test", "to_surface"]
 
 STALL = 5  # steps over which a stalled distance means equilibrium (method.md §5)
 STALL_GAIN = 1e-3  # the least relative gain of the pulled pairs' distance over STALL steps
@@ -32,6 +32,7 @@ PLANE = 12  # nearest points whose least-squares quadric is the surface (method.
 # and 900 vertices 1.3 and 2.6, an ellipsoid (2, 1, 0.5) of 162 vertices 3.0, one of 42
 # 14 and 61, tori of 72 and 128 points 57 and 29 (method.md §5).
 COARSE_FLOOR = 5
+SURFACE_BLOCK = 1 << 16  # points measured at once: about 100 MB of work arrays a block
 QUADRIC_RIDGE = 1e-3  # the quadric's curvature damped by this, per point (method.md §5)
 LAZY_SPACINGS = 4  # surfaces measured within the tolerance plus this many spacings (§5)
 
@@ -222,7 +223,11 @@ def to_surface(points: np.ndarray, cloud: np.ndarray, tree: cKDTree,
     their extent (a point beyond it adds its distance to the patch's rim). Linear in
     memory; unlike the distance to the nearest cloud point, nearly zero for a point on a
     smooth surface between samples, and unlike a plane's, at any resolution: the planes
-    of a coarse cloud cut the chords of a curved surface (method.md §5)."""
+    of a coarse cloud cut the chords of a curved surface (method.md §5). In blocks of
+    ``SURFACE_BLOCK`` points."""
+    if len(points) > SURFACE_BLOCK:
+        return np.concatenate([to_surface(points[b:b + SURFACE_BLOCK], cloud, tree, skip)
+                               for b in range(0, len(points), SURFACE_BLOCK)])
     near = cloud[tree.query(points, k=PLANE + skip)[1][:, skip:]]  # (p, k, d)
     centre = near.mean(axis=1)
     spread = near - centre[:, None]
