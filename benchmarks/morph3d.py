@@ -4,11 +4,21 @@ cases: steps, convergence and the end shape's distance to the target both ways.
     PYTHONPATH=src python benchmarks/morph3d.py --shape blob --points 2000 20000 \
         --angles 0 90 --noise 0 0.01 [--pairs matcher|true]
 
-``--surfaces`` morphs meshes with faces instead (icospheres of trimesh onto finer or
-coarser turned ellipsoids, radii (1.3, 1, 0.8) or as named, the bunny onto warped and
-turned copies of itself) and reports the self-intersections of every step's surface
-(faces cutting another face, pymeshlab): the largest count, the number of steps with
-any, and the counts per step.
+``--surfaces`` morphs meshes with faces instead and reports the self-intersections of
+every step's surface (faces cutting another face, pymeshlab): the largest count, the
+number of steps with any, and the counts per step. The meshes: icospheres of trimesh
+onto finer or coarser turned ellipsoids, radii (1.3, 1, 0.8) or as named; the bunny
+(``data/bunny.npz``) onto warped and turned copies of itself, and onto a coarser
+(pymeshlab's quadric edge collapse) and a finer (trimesh's subdivision) copy, warped and
+turned; the bone, cow and airplane scans that pymeshlab ships with its tests (GPL-3:
+read from the installed package at run time, never copied), warped and turned; the
+surface of scikit-image's 3D binary blobs (the largest blob, ``marching_cubes``,
+4 voxels a step), warped and turned. ``--cases`` picks some by name (substrings),
+``--model-nodes`` sets the reduced model's size.
+
+``--resolutions`` morphs icospheres onto turned ellipsoids at other resolutions (42-2562
+vertices, radii (1.3, 1, 0.8), (1.5, 1, 0.7), (2, 1, 0.5)) with the true pairs and the
+matcher's.
 
 Distances are mean nearest-point distances in % of the target's RMS radius ("size"): one
 target node spacing is about 4 % of the size at 2000 points and 1.3 % at 20 000, and with
@@ -71,9 +81,109 @@ def surface_cases():
     return cases
 
 
-def run_surface(name, src, tgt):
+def _turn(points, angle, seed):
+    """``points`` warped (``match3d.warp``, 5-25 % of the size) and turned by ``angle``
+    degrees about an oblique axis."""
+    from scipy.spatial.transform import Rotation
+    rng = np.random.default_rng([seed, angle])
+    rot = Rotation.from_rotvec(np.deg2rad(angle) * np.array([0.3, -0.5, 0.8]) / 0.990)
+    return rot.apply(warp(points, rng, span=(0.05, 0.25)))
+
+
+def _decimated(points, faces, vertices):
+    """The mesh decimated to about ``vertices`` (pymeshlab's quadric edge collapse)."""
+    import pymeshlab
+    meshes = pymeshlab.MeshSet()
+    meshes.add_mesh(pymeshlab.Mesh(points, faces.astype(np.int32)))
+    meshes.meshing_decimation_quadric_edge_collapse(targetfacenum=2 * vertices - 4,
+                                                    preservetopology=True)
+    mesh = meshes.current_mesh()
+    return mesh.vertex_matrix(), mesh.face_matrix().astype(np.intp)
+
+
+def _sample_meshes():
+    """(name, points, faces) of the scans pymeshlab ships (read, not copied: GPL-3)."""
+    import pymeshlab
+    import trimesh
+    folder = Path(pymeshlab.__file__).parent / "tests" / "sample_meshes"
+    for name in ("bone.ply", "cow.obj", "airplane.obj"):
+        mesh = trimesh.load(folder / name, force="mesh", process=True)
+        yield name.split(".")[0], np.asarray(mesh.vertices), np.asarray(mesh.faces)
+
+
+def _blob_mesh():
+    """The surface of the largest of scikit-image's 3D binary blobs (marching cubes every
+    4 voxels; decimated by pymeshlab it cut itself), its faces on the same three
+    vertices kept once (two pairs, which cut each other once moved)."""
+    import trimesh
+    from scipy import ndimage
+    from skimage import data, measure
+    volume = data.binary_blobs(length=64, n_dim=3, volume_fraction=0.25, rng=3)
+    label = measure.label(volume)
+    blob = ndimage.binary_fill_holes(label == np.argmax(np.bincount(label.ravel())[1:]) + 1)
+    points, faces, *_ = measure.marching_cubes(np.pad(blob, 2).astype(float), 0.5,
+                                               step_size=4)
+    mesh = trimesh.Trimesh(points, faces, process=True)
+    mesh.update_faces(mesh.unique_faces())
+    mesh.remove_unreferenced_vertices()
+    return np.asarray(mesh.vertices), np.asarray(mesh.faces)
+
+
+def mesh_cases():
+    """(name, source Shape, target Shape) of the real meshes: the bunny at other
+    resolutions, pymeshlab's scans and scikit-image's blob, each onto a warped and
+    turned copy; those whose package is missing are left out (and said)."""
+    import trimesh
+    points, faces = bunny_mesh()
+    cases = []
+    try:
+        coarse = _decimated(points, faces, 900)
+        for a, b, tag in ((coarse, (points, faces), "bunny900->1839"),
+                          ((points, faces), coarse, "bunny1839->900")):
+            cases.append((tag + "w30", mm.Shape(a[0], faces=a[1]),
+                          mm.Shape(_turn(b[0], 30, 2), faces=b[1])))
+        cases += [(f"{n}->warp30", mm.Shape(p, faces=f), mm.Shape(_turn(p, 30, 3), faces=f))
+                  for n, p, f in _sample_meshes()]
+        blob = _blob_mesh()
+        cases.append(("blobs->warp30", mm.Shape(blob[0], faces=blob[1]),
+                      mm.Shape(_turn(blob[0], 30, 4), faces=blob[1])))
+    except ImportError as error:
+        print(f"left out (no {error.name}): the decimated bunny, the scans, the blob")
+    fine = trimesh.Trimesh(points, faces, process=False).subdivide()
+    cases.append(("bunny1839->7k w30", mm.Shape(points, faces=faces),
+                  mm.Shape(_turn(np.asarray(fine.vertices), 30, 5),
+                           faces=np.asarray(fine.faces))))
+    return cases
+
+
+def resolution_grid():
+    """Icospheres onto turned ellipsoids at other resolutions (42-2562 vertices; the
+    coarser one's vertices are the first of the finer's, so the true pairs are known),
+    with the true pairs and the matcher's: steps, why it stopped, d/tol, the largest
+    count of self-intersecting faces."""
+    import trimesh
+    from scipy.spatial.transform import Rotation
+
+    ico = {s: trimesh.creation.icosphere(s) for s in (1, 2, 3, 4)}
+    turn = Rotation.from_rotvec([0.3, -0.5, 0.4])
+    print(f"{'source':>6} {'target':>6} {'radii':>14} {'pairs':>7} {'stop':>11} "
+          f"{'steps':>5} {'d/tol':>6} {'max':>5}")
+    for a, b in ((3, 2), (4, 2), (3, 1), (2, 3), (2, 4)):
+        for radii in ((1.3, 1, 0.8), (1.5, 1, 0.7), (2, 1, 0.5)):
+            va, vb = np.asarray(ico[a].vertices), np.asarray(ico[b].vertices)
+            n = min(len(va), len(vb))
+            src = mm.Shape(va, faces=np.asarray(ico[a].faces))
+            tgt = mm.Shape(turn.apply(vb * radii), faces=np.asarray(ico[b].faces))
+            for name, pairs in (("true", np.c_[np.arange(n), np.arange(n)]), ("matcher", None)):
+                r = mm.morph(src, tgt, matching=pairs)
+                crossed = "-" if r.self_intersections is None else r.self_intersections.max()
+                print(f"{src.m:6d} {tgt.m:6d} {str(radii):>14} {name:>7} {r.stop_reason:>11} "
+                      f"{r.steps:5d} {r.distance / r.tolerance:6.2f} {crossed:>5}", flush=True)
+
+
+def run_surface(name, src, tgt, **options):
     start = time.perf_counter()
-    result = mm.morph(src, tgt)
+    result = mm.morph(src, tgt, **options)
     seconds = time.perf_counter() - start
     counts = result.self_intersections
     if counts is None:
@@ -81,7 +191,7 @@ def run_surface(name, src, tgt):
     else:
         crossed = (f"{counts.max():5d} {np.count_nonzero(counts):5d}  "
                    + ",".join(map(str, counts)))
-    print(f"{name:>18} {src.m:6d} {tgt.m:6d} {result.steps:5d} {str(result.converged):>5} "
+    print(f"{name:>20} {src.m:6d} {tgt.m:6d} {result.steps:5d} {str(result.converged):>5} "
           f"{result.distance / result.tolerance:6.2f} {seconds:6.1f}  {crossed}", flush=True)
 
 
@@ -89,18 +199,30 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--surfaces", action="store_true",
                         help="the mesh cases, with self-intersections per step")
+    parser.add_argument("--resolutions", action="store_true",
+                        help="icospheres onto ellipsoids at other resolutions, true and "
+                        "matcher pairs")
+    parser.add_argument("--model-nodes", type=int, default=None,
+                        help="with --surfaces: the morphs' model_nodes (default: theirs)")
+    parser.add_argument("--cases", nargs="+", default=None,
+                        help="with --surfaces: only the cases whose names contain these")
     parser.add_argument("--shape", default="blob", choices=("blob", "bunny"))
     parser.add_argument("--points", type=int, nargs="+", default=[2000, 20000])
     parser.add_argument("--angles", type=float, nargs="+", default=[0.0, 90.0])
     parser.add_argument("--noise", type=float, nargs="+", default=[0.0, 0.01])
     parser.add_argument("--pairs", default="matcher", choices=("matcher", "true"))
     args = parser.parse_args()
+    if args.resolutions:
+        resolution_grid()
+        return
     if args.surfaces:
-        print(f"{'case':>18} {'source':>6} {'target':>6} {'steps':>5} {'conv':>5} "
+        print(f"{'case':>20} {'source':>6} {'target':>6} {'steps':>5} {'conv':>5} "
               f"{'d/tol':>6} {'time s':>6}  {'max':>5} {'steps':>5}  self-intersecting "
               f"faces per step")
-        for case in surface_cases():
-            run_surface(*case)
+        for case in surface_cases() + mesh_cases():
+            if args.cases is None or any(c in case[0] for c in args.cases):
+                run_surface(*case, **({} if args.model_nodes is None
+                                      else {"model_nodes": args.model_nodes}))
         return
     print(" shape  points angle noise    pairs steps  conv  end->t%  t->end%  time s")
     for m in args.points:

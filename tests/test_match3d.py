@@ -8,6 +8,7 @@ from scipy.spatial.transform import Rotation
 
 import modalmorph as mm
 from modalmorph.matching.clouds import refine
+from modalmorph.simulation.stop import to_surface
 
 
 def blob(m, rng):
@@ -57,8 +58,10 @@ def test_morph_with_own_pairs_reaches_target():
     matching = mm.match(src, tgt)
     result = mm.morph(src, tgt, matching=matching, model_nodes=800)
     end, size = result.shapes[-1], mm.Shape(tgt).size
-    # the end shape within 1 % of the size both ways (mean nearest distance)
-    assert cKDTree(tgt).query(end)[0].mean() <= 0.01 * size
+    # the end shape within 1 % of the size both ways: its nodes to the target's surface
+    # (the 800 nodes outnumber the 640 target points, so those sharing a partner are
+    # carried between them, not onto them), the target's points to the nearest node
+    assert to_surface(end, tgt, cKDTree(tgt)).mean() <= 0.01 * size
     assert cKDTree(end).query(tgt)[0].mean() <= 0.01 * size
 
 

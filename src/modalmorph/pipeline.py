@@ -23,7 +23,8 @@ docs/method.md:
   between its neighbours' partners; ``"mean"`` is the paper's rule (20), which folds long
   runs (method.md §4, "Springs (19) and unmatched nodes (20)").
 - ``model_nodes=400``: larger sources are modelled on 400 nodes spread over them and move
-  with the element's field (method.md §7, "Reduced models in the dynamics").
+  with the element's field (in 3D its moving affine fit, which does not ripple between the
+  model's nodes; method.md §7, "Reduced models in the dynamics").
 - ``scheme="implicit"``: the spring enters the effective stiffness, unconditionally stable;
   ``"explicit"`` is the paper's (stable for small ``k`` only).
 - ``tol``: converged when :attr:`Morph.distance` (the stop test's measure, both ways for

@@ -63,8 +63,8 @@ def intersection_sentence(counts, *, model_nodes: int | None = None,
                           nodes: int | None = None) -> str:
     """What a morph's message adds about its self-intersections: nothing when none of its
     steps has any (or they were not checked); with a reduced model (``model_nodes`` <
-    ``nodes``), the hint to model every node, which avoided them on the bunny (method.md
-    §5)."""
+    ``nodes``), the hint to model every node, which avoided them on the bunny when the
+    reduced model moved with the element's field (method.md §5)."""
     if counts is None or not np.any(counts):
         return ""
     counts = np.asarray(counts)
