@@ -33,6 +33,11 @@ _COARSE_ROUNDS = (60, 10)  # rounds of a coarse level, cheap or not (100k blob: 
 _OVERRELAX = 2.0  # over-relaxation of every move (x3 diverged; x1: 1.71 against 1.52)
 _NEIGHBOURS = 16  # nearest nodes: controls per node, and edges of the transport graph
 _SINKHORN = 30  # scaling iterations of the transport
+# Scaling iterations of a transport with more points than _MANY_POINTS on a side (blob,
+# 100 000 points, 0/30/90 deg: median 1.19/0.96/1.33 -> 1.15/0.90/1.21 target spacings,
+# p90 5.7/3.0/6.3 -> 6.1/1.8/4.9, 21 -> 19 CPU-s); smaller transports keep _SINKHORN.
+_SINKHORN_MANY = 10
+_MANY_POINTS = 10_000
 _TEMPERATURE = 0.5  # width of the transport's Gaussian, x the level's cube width
 _WIDTH = 8.0  # smoothing width, x the level's cube width
 _STEP = 2.0  # ratio of the cube widths of successive levels
@@ -107,7 +112,7 @@ def _transport(z: np.ndarray, mu: np.ndarray, y: np.ndarray, nu: np.ndarray,
     P.sum_duplicates()
     P.data = np.maximum(P.data, 1e-300)
     a, b = np.ones(s), np.ones(t)
-    for _ in range(_SINKHORN):
+    for _ in range(_SINKHORN if max(s, t) <= _MANY_POINTS else _SINKHORN_MANY):
         a = mu / (P @ b)
         b = nu / (P.T @ a)
     plan = P.multiply(a[:, None]).multiply(b[None, :]).tocsr()
