@@ -80,8 +80,14 @@ LARGE = 2000  # more nodes: matched on COARSE nodes, then refined (linear memory
 COARSE = 1000  # nodes of the coarse match of a large object (not measured)
 NODES_PER_COARSE_CLOUD = 20  # 3D sets above LARGE: a coarse node per 20 (10 000 points: 2x faster)
 COARSE_CLOUD = 3000  # at most (100 000 points: error 0.88-0.95 spacings, 1000 nodes 1.02-1.33)
-FINE_CLOUD = 100_000  # 3D sets above: matched on even subsets of this many nodes (see below)
-CARRY = 4  # subset nodes whose moves carry a node of such a set (inverse-distance weights)
+# 3D sets above: matched on even subsets of this many nodes (blob, 1 000 000 points, 30 deg:
+# subsets of 50 000 / 100 000 / 200 000: median 4.3 / 3.9 / 4.2 target spacings, 18 / 26 /
+# 54 CPU-s; cell means instead of even subsets 6.2, random subsets 5.2; one more level of
+# refine on all the nodes after the subsets', cubes a subset spacing wide: 4.0, 46 CPU-s).
+FINE_CLOUD = 100_000
+# Subset nodes whose moves carry a node of such a set (inverse-distance weights): the
+# nodes so carried land as well as the subset's own (1M blob: 3.79 and 3.82 spacings).
+CARRY = 4
 ALTERNATION_NODES = 400  # nodes in the alternation (at 1000: 0.52 -> 0.27 s, same precision)
 MAX_AFFINITY = 4e7  # largest m x n affinity the paper's searches build (memory; not measured)
 FLAT_AREA = 5e-10  # area / RMS radius^2 of a closed contour on one line (rounding ~1e-16)
