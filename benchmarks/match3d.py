@@ -26,7 +26,8 @@ what no pairing can beat; with noise or uneven sampling it is not 0), med/p90 (m
 and 90th percentile error of the pairs returned), paired (the fraction of source points
 given a partner), <=1 / <=3 (fraction of source points whose pair is within 1 and 3
 spacings; unpaired points count as wrong), time and peak memory (each case in its own
-process: peak resident set size of the child, MB).
+process: peak resident set size of the child, MB), and the machine's load average
+(1 minute) when the case ended: on a shared machine wall time grows with it.
 
 Variants (``--variants``,
 :data:`VARIANTS`): ``base`` as above; ``warp5`` and ``warp25`` a warp of exactly 5 % and
@@ -40,13 +41,16 @@ run here.
 Run ``python benchmarks/match3d.py`` for the whole table (CPD only up to ``--cpd-up-to``
 points, 2000 by default: pycpd took over 600 s at 10 000; each case limited by
 ``--timeout`` seconds), or
-``--sizes 2000 --angles 0,180 --shapes bunny`` for part of it.
+``--sizes 2000 --angles 0,180 --shapes bunny`` for part of it; issue 25's large rows:
+``--shapes blob --sizes 100000,1000000 --angles 30 --methods modalmorph`` (about 40 s and
+0.6 GB at 1 000 000 points).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import subprocess
 import sys
@@ -224,7 +228,8 @@ def one(method: str, shape: str, m: int, angle: float, noise: float,
                 p90=float(np.percentile(paired, 90)),
                 paired=len(paired) / len(err), w1=float(np.mean(err <= 1)),
                 w3=float(np.mean(err <= 3)), s=seconds,
-                peak=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+                peak=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                load=os.getloadavg()[0])
 
 
 def child(args, method, shape, m, angle, variant="base") -> dict | str:
@@ -272,7 +277,8 @@ def main(argv=None) -> int:
           f"peak RSS in MB")
     print(f"{'shape':>7} {'variant':>7} {'points':>7} {'angle':>5} {'method':>10} {'best':>5} "
           f"{'med':>6} "
-          f"{'p90':>6} {'paired':>6} {'<=1':>5} {'<=3':>5} {'time s':>7} {'peak':>6}",
+          f"{'p90':>6} {'paired':>6} {'<=1':>5} {'<=3':>5} {'time s':>7} {'peak':>6} "
+          f"{'load':>5}",
           flush=True)
     for shape in args.shapes.split(","):
         for variant in args.variants.split(","):
@@ -288,7 +294,7 @@ def main(argv=None) -> int:
                               f"{head} {r['best']:>5.2f} {r['med']:>6.2f} {r['p90']:>6.2f} "
                               f"{r['paired']:>6.2f} "
                               f"{r['w1']:>5.2f} {r['w3']:>5.2f} {r['s']:>7.2f} "
-                              f"{r['peak']:>6.0f}", flush=True)
+                              f"{r['peak']:>6.0f} {r['load']:>5.1f}", flush=True)
     return 0
 
 

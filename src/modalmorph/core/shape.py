@@ -11,7 +11,8 @@ from scipy.spatial import cKDTree
 from ..errors import ShapeError
 
 __all__ = ["ImageFrame", "Shape", "as_shape", "check_pairs", "coarsen", "even_subset",
-           "resample", "share", "spread_indices", "GRID_ROUNDS", "HUGE", "FPS_POOL"]
+           "resample", "share", "spread_indices", "GRID_ROUNDS", "HUGE", "FPS_POOL",
+           "FPS_TREE"]
 
 # Two nodes closer than this fraction of the object's RMS radius are "the same node".
 _REPEAT_TOL = 1e-9
@@ -23,6 +24,11 @@ _POINT_TOL = 1e-10
 GRID_ROUNDS = 6  # cell sizes even_subset tries: within 10 % of m on icospheres (method.md §5)
 HUGE = 200_000  # unordered sets above this: farthest points among an even_subset (§7)
 FPS_POOL = 20  # its candidates per point chosen (§7)
+# Farthest points through a k-d tree above this many points (ellipsoid points, 3000 of
+# 100 000: 6.6 -> 0.22 s; 1000 of 20 000: 0.57 -> 0.09 s; 400 of 2000: 32 -> 10 ms; 400 of
+# 600: 10 -> 13 ms); the same points either way.
+FPS_TREE = 1000
+_BALL_MARGIN = 1.0 + 1e-9  # the ball's radius widened past rounding (relative)
 
 
 @dataclass(frozen=True)
@@ -343,13 +349,31 @@ def spread_indices(shape: Shape, n: int) -> np.ndarray:
     if m > HUGE and m > FPS_POOL * n:  # linear cost, not m n: among an even subset
         pool = even_subset(x, FPS_POOL * n)
         x = x[pool]
+    chosen = _farthest_points(x, n)
+    return np.sort(chosen if pool is None else pool[chosen])
+
+
+def _farthest_points(x: np.ndarray, n: int) -> np.ndarray:
+    """Farthest-point sampling of ``n`` of the points ``x`` (m, d), from the point nearest
+    the origin. Above ``FPS_TREE`` points each new point updates only the distances within
+    the current largest one (a k-d tree's ball): the same points, in time about
+    ``m log n`` instead of ``m n``."""
     chosen = np.empty(n, dtype=np.intp)
     chosen[0] = np.argmin(np.sum(x**2, axis=1))
     dist = np.sum((x - x[chosen[0]]) ** 2, axis=1)
+    tree = cKDTree(x) if len(x) > FPS_TREE else None
     for i in range(1, n):
-        chosen[i] = np.argmax(dist)
-        dist = np.minimum(dist, np.sum((x - x[chosen[i]]) ** 2, axis=1))
-    return np.sort(chosen if pool is None else pool[chosen])
+        c = chosen[i] = np.argmax(dist)
+        if tree is None:
+            dist = np.minimum(dist, np.sum((x - x[c]) ** 2, axis=1))
+            continue
+        # a point nearer the new one than its distance lies within the largest distance
+        # (widened past rounding: the extra points keep their distance)
+        near = tree.query_ball_point(x[c], np.sqrt(dist[c]) * _BALL_MARGIN,
+                                     return_sorted=False)
+        near = np.asarray(near, dtype=np.intp)
+        dist[near] = np.minimum(dist[near], np.sum((x[near] - x[c]) ** 2, axis=1))
+    return chosen
 
 
 def even_subset(points: np.ndarray, m: int) -> np.ndarray:
