@@ -40,7 +40,8 @@ _COMMON_MARGIN = 2.0  # common frame / best total: shared hearts <= 1.51, turned
 _STARTS = 120  # turns spread evenly over all rotations, besides the principal axes' 24
 _SCOUT_NODES = 64  # nodes of each object in the first stage
 _SCOUT_ROUNDS = 10  # rounds of the first stage
-_FINALISTS = 16  # starts carried to the second stage
+_FINALISTS = 16  # starts carried to the second stage, ended turned at least
+_DISTINCT = 20.0  # degrees from each other (the bone at 30 deg: 16 ends of one wrong pose)
 _CLOSE = 1.05  # second-stage scores within this x the best: the modal total decides
 _ICP_ROUNDS = 30  # rounds of the second stage, on _COARSE_NODES_CLOUD nodes
 _TRIM = 3.0  # coarse target spacings: pairs farther are left out of the fit and the score
@@ -221,6 +222,18 @@ def _spread(shape, k: int) -> tuple[np.ndarray, float]:
     return p, _TRIM * cKDTree(p).query(p, k=2)[0][:, 1].mean()
 
 
+def _distinct(sims: list) -> list:
+    """The first ``_FINALISTS`` similarities of ``sims`` whose rotations differ from
+    every earlier one kept by more than ``_DISTINCT`` degrees."""
+    kept, cos = [], np.cos(np.radians(_DISTINCT))
+    for sim in sims:
+        if all((np.trace(sim.rotation.T @ k.rotation) - 1) / 2 < cos for k in kept):
+            kept.append(sim)
+        if len(kept) == _FINALISTS:
+            break
+    return kept
+
+
 def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray) -> Pose:
     """Pose of a 3D point set: trimmed ICP (:func:`_trimmed_icp`) from many starts (the
     identity with ``rotation="auto"``, the principal axes' rotation with each of the 24
@@ -242,9 +255,9 @@ def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray) -> Pose:
     (xs, ys, trim) = (*_spread(src, _SCOUT_NODES)[:1], *_spread(tgt, _SCOUT_NODES))
     scouts = [_trimmed_icp(xs, ys, Similarity(r, 1.0, zero), trim, rotate, _SCOUT_ROUNDS)
               for r in rots]
-    best = sorted(range(len(rots)), key=lambda r: scouts[r][0])[:_FINALISTS]
+    best = _distinct([scouts[r][1] for r in sorted(range(len(rots)), key=lambda r: scouts[r][0])])
     (x, y, trim) = (*_spread(src, _COARSE_NODES_CLOUD)[:1], *_spread(tgt, _COARSE_NODES_CLOUD))
-    tried = [_trimmed_icp(x, y, scouts[r][1], trim, rotate) for r in sorted(best)]
+    tried = [_trimmed_icp(x, y, sim, trim, rotate) for sim in best]
     low = min(score for score, _ in tried)
     close = [sim for score, sim in tried if score <= _CLOSE * low]
     totals = [trusted_pairs(costs, sim.apply(costs.x), sub)[1] for sim in close]
