@@ -202,8 +202,15 @@ def _trimmed_icp(x: np.ndarray, y: np.ndarray, sim: Similarity, trim: float,
         sim = align(np.r_[x[near_s], x[it[near_t]]], np.r_[y[js[near_s]], y[near_t]],
                     rotate=rotate)
         cut = max(cut * shrink, trim)
-    score = np.mean(np.minimum(ds, trim) ** 2) + np.mean(np.minimum(dt, trim) ** 2)
-    return float(score), sim
+    return _score(x, y, sim, trim), sim
+
+
+def _score(x: np.ndarray, y: np.ndarray, sim: Similarity, trim: float) -> float:
+    """The mean of both ways' squared nearest distances capped at ``trim`` between the
+    source nodes ``x`` placed by ``sim`` and the target nodes ``y``."""
+    z = sim.apply(x)
+    ds, dt = cKDTree(y).query(z)[0], cKDTree(z).query(y)[0]
+    return float(np.mean(np.minimum(ds, trim) ** 2) + np.mean(np.minimum(dt, trim) ** 2))
 
 
 def _even_turns(n: int) -> np.ndarray:
@@ -234,7 +241,7 @@ def _distinct(sims: list) -> list:
     return kept
 
 
-def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray) -> Pose:
+def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray, modal: Similarity) -> Pose:
     """Pose of a 3D point set: trimmed ICP (:func:`_trimmed_icp`) from many starts (the
     identity with ``rotation="auto"``, the principal axes' rotation with each of the 24
     turns that permute and sign them, ``_STARTS`` turns spread over all rotations), first
@@ -258,6 +265,7 @@ def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray) -> Pose:
     best = _distinct([scouts[r][1] for r in sorted(range(len(rots)), key=lambda r: scouts[r][0])])
     (x, y, trim) = (*_spread(src, _COARSE_NODES_CLOUD)[:1], *_spread(tgt, _COARSE_NODES_CLOUD))
     tried = [_trimmed_icp(x, y, sim, trim, rotate) for sim in best]
+    tried.append((_score(x, y, modal, trim), modal))
     low = min(score for score, _ in tried)
     close = [sim for score, sim in tried if score <= _CLOSE * low]
     totals = [trusted_pairs(costs, sim.apply(costs.x), sub)[1] for sim in close]
@@ -272,7 +280,12 @@ def cloud_pose(p: Problem, costs: Costs, sub: np.ndarray) -> Pose:
     180 degrees apart can be close); the cheapest, or with ``rotation="auto"`` the best
     common-frame pose unless another is cheaper by more than ``_COMMON_MARGIN``."""
     if p.src.dim == 3:
-        return _surface_pose(p, costs, sub)
+        return _surface_pose(p, costs, sub, _assignment_pose(p, costs, sub).sim)
+    return _assignment_pose(p, costs, sub)
+
+
+def _assignment_pose(p: Problem, costs: Costs, sub: np.ndarray) -> Pose:
+    """The pose of :func:`cloud_pose` in 2D: by coarse assignments and rigid rounds."""
     C, ci, cj, near, evidence = _coarse_costs(p)
     x, y = costs.x, costs.y
     rotate, common = p.rotation != "none", False
