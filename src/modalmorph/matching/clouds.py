@@ -9,8 +9,11 @@ densities: random subsets of the nodes, used before, made the transport match th
 chance clumps and drifted 2 target spacings away from the true correspondence at 100 000
 nodes); the summaries are put in an entropic transport, each node weighing the area it
 stands for (so that a surface sampled unevenly, as by a scanner, is covered by area, not
-by count), and the move it asks of the source is smoothed with Gaussians (the kernel of
-Sclaroff's element (1)) and applied to every node. The last level uses the nodes
+by count) and the marginals relaxed (unbalanced transport: a part that one object lacks,
+a cap cut away, stays unpaired instead of pulling the rest over to cover it), and the
+move it asks of the source is smoothed with Gaussians (the kernel of Sclaroff's element
+(1)), each point weighing the share of its mass that found a partner, and applied to
+every node. The last level uses the nodes
 themselves, and its landings, noisy as the target is, are averaged over each node's
 nearest neighbours (beyond the best similarity). Memory is linear in the node counts
 (k-d trees, sparse transport plans).
