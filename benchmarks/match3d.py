@@ -1,4 +1,5 @@
-"""3D correspondence on scanned and procedural surfaces: modalmorph against CPD (issue 16).
+"""3D correspondence on scanned and procedural surfaces: modalmorph against CPD and BCPD
+(issues 16, 25).
 
 Each case is a surface sampled evenly (area-weighted random points on its faces) at
 ``m`` points: the source. The target is the same points moved by a smooth random warp
@@ -20,14 +21,19 @@ Shapes:
   ``benchmarks/data/bunny.npz`` (40 KB).
 - ``blob``: the asymmetric bumpy ellipsoid of ``benchmarks/scale.py`` (procedural),
   sampled through uniform points on the sphere.
+- ``cow``, ``bone``, ``airplane``: the sample meshes that ship inside pymeshlab (GPL-3;
+  read from the installed package at run time, never copied here; ``pip install
+  pymeshlab``), each closed: a cow, a bone, an airplane with thin wings.
 
 Columns: best (the median distance from the true position to the nearest target point:
 what no pairing can beat; with noise or uneven sampling it is not 0), med/p90 (median
 and 90th percentile error of the pairs returned), paired (the fraction of source points
 given a partner), <=1 / <=3 (fraction of source points whose pair is within 1 and 3
-spacings; unpaired points count as wrong), time and peak memory (each case in its own
-process: peak resident set size of the child, MB), and the machine's load average
-(1 minute) when the case ended: on a shared machine wall time grows with it.
+spacings; unpaired points count as wrong), sym (for a body with a symmetry, the torus:
+the median error under the best of its symmetries, what a correspondence can identify
+there; NaN for the others), time and peak memory (each case in its own process: peak
+resident set size of the child, MB), and the machine's load average (1 minute) when
+the case ended: on a shared machine wall time grows with it.
 
 Variants (``--variants``,
 :data:`VARIANTS`): ``base`` as above; ``warp5`` and ``warp25`` a warp of exactly 5 % and
@@ -35,11 +41,14 @@ Variants (``--variants``,
 ``uneven``, the target sampled anew with a density growing 20 times across it, as a
 scanner sees a surface (errors then include the distance from the true position to the
 nearest target sample, up to about half a spacing); ``all``, every target point kept.
-BCPD, the fastest CPD variant, is a C program that no package registry ships: it is not
-run here.
 
-Run ``python benchmarks/match3d.py`` for the whole table (CPD only up to ``--cpd-up-to``
-points, 2000 by default: pycpd took over 600 s at 10 000; each case limited by
+Peers (``--methods``, :data:`PEERS`): ``cpd``, pycpd's deformable CPD; ``bcpd``,
+probreg's Python BCPD (:func:`run_bcpd`; the issue's BCPD++ is a C program that no
+package registry ships). Both are optional (``pip install pycpd probreg``) and run up
+to ``--cpd-up-to`` points.
+
+Run ``python benchmarks/match3d.py`` for the whole table (the peers only up to
+``--cpd-up-to`` points, 2000 by default: pycpd took over 600 s at 10 000; each case limited by
 ``--timeout`` seconds), or
 ``--sizes 2000 --angles 0,180 --shapes bunny`` for part of it; issue 25's large rows:
 ``--shapes blob --sizes 100000,1000000 --angles 30 --methods modalmorph`` (about 40 s and
@@ -49,6 +58,7 @@ points, 2000 by default: pycpd took over 600 s at 10 000; each case limited by
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import os
 import resource
@@ -121,6 +131,29 @@ def torus_mesh() -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(mesh.vertices), np.asarray(mesh.faces)
 
 
+# Meshes that ship inside a package: pymeshlab's sample meshes (GPL-3, loaded from the
+# installed package at run time, never copied here; ``pip install pymeshlab``): a cow
+# (2903 vertices), a bone (1513) and an airplane (5400, thin wings), each closed.
+PACKAGED = {"cow": "cow.obj", "bone": "bone.ply", "airplane": "airplane.obj"}
+
+
+def packaged_mesh(shape: str) -> tuple[np.ndarray, np.ndarray]:
+    """One of :data:`PACKAGED`, read with trimesh from pymeshlab's installed tests."""
+    import pymeshlab
+    import trimesh
+    path = Path(pymeshlab.__file__).parent / "tests" / "sample_meshes" / PACKAGED[shape]
+    mesh = trimesh.load(path, force="mesh")
+    return np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces)
+
+
+def torus_turns() -> np.ndarray:
+    """The torus's symmetries that a proper correspondence can follow, (720, 3, 3): turns
+    about its axis (z) every degree, each also flipped over (half a turn about x)."""
+    about = Rotation.from_euler("z", np.arange(360.0)[:, None], degrees=True)
+    flip = Rotation.from_euler("x", 180, degrees=True)
+    return np.concatenate([about.as_matrix(), (about * flip).as_matrix()])
+
+
 def twisted(m: int) -> np.ndarray:
     """benchmarks/scale.py's blob (an ellipsoid with two bumps; Fibonacci lattice)."""
     from scale import blob
@@ -135,6 +168,8 @@ def sample(shape: str, m: int, rng) -> np.ndarray:
         return sample_mesh(*torus_mesh(), m, rng)
     if shape == "twisted":
         return twisted(m)
+    if shape in PACKAGED:
+        return sample_mesh(*packaged_mesh(shape), m, rng)
     return sample_blob(m, rng)
 
 
@@ -149,8 +184,10 @@ def uneven(shape: str, m: int, rng) -> np.ndarray:
 
 
 def make_case(shape: str, m: int, angle: float, noise: float, seed: int = 0, *,
-              span=WARP, overlap: str = "random", sampling: str = "even", keep=KEEP):
-    """Source (m, 3), target (n, 3), truth (m, 3): where each source point belongs.
+              span=WARP, overlap: str = "random", sampling: str = "even", keep=KEEP,
+              carry: bool = False):
+    """Source (m, 3), target (n, 3), truth (m, 3): where each source point belongs; with
+    ``carry`` also the map that takes the source's points to their true places.
 
     ``span``: the warp's largest displacement, a fraction of the size drawn in that
     range (the twisted shape is bent and twisted by scale.py's ``deform`` instead);
@@ -169,17 +206,21 @@ def make_case(shape: str, m: int, angle: float, noise: float, seed: int = 0, *,
     else:
         field = warp_field(src, rng, span)
     shift = size * rng.normal(size=3)
-    truth = rot.apply(src + field(src)) + shift
+    def move(q):
+        return rot.apply(q + field(q)) + shift
+
+    truth = move(src)
     tgt = truth + noise * size * rng.normal(size=truth.shape)
     if sampling == "uneven":
         q = uneven(shape, m, rng)
-        tgt = rot.apply(q + field(q)) + shift + noise * size * rng.normal(size=q.shape)
+        tgt = move(q) + noise * size * rng.normal(size=q.shape)
     n = int(round(keep * len(tgt)))
     if overlap == "cut":
         d = rng.normal(size=3)
-        kept = np.argsort(tgt @ d)[:n]
-        return src, tgt[rng.permutation(kept)], truth
-    return src, tgt[rng.permutation(len(tgt))[:n]], truth
+        tgt = tgt[rng.permutation(np.argsort(tgt @ d)[:n])]
+    else:
+        tgt = tgt[rng.permutation(len(tgt))[:n]]
+    return (src, tgt, truth, move) if carry else (src, tgt, truth)
 
 
 def errors(src, tgt, truth, pairs) -> tuple[np.ndarray, float]:
@@ -203,6 +244,39 @@ def run_cpd(src, tgt):
     return np.c_[np.arange(len(src)), cKDTree(tgt).query(moved)[1]]
 
 
+def run_bcpd(src, tgt):
+    """probreg's BCPD (Bayesian coherent point drift, Hirose 2021; ``pip install
+    probreg``) on both sets centred and scaled to unit RMS radius (its defaults assume
+    such a scale: on the bunny's own units it did not converge), outlier weight
+    w = 0.1, at most 100 iterations; each moved source point paired with its nearest
+    target point."""
+    from probreg import bcpd
+
+    def unit(p):
+        c = p - p.mean(axis=0)
+        return c / np.sqrt(np.mean(np.sum(c**2, axis=1)))
+
+    y = unit(tgt)
+    moved = np.asarray(bcpd.registration_bcpd(unit(src), y, w=0.1, maxiter=100)
+                       .transform(unit(src)))
+    return np.c_[np.arange(len(src)), cKDTree(y).query(moved)[1]]
+
+
+PEERS = {"modalmorph": run_modalmorph, "cpd": run_cpd, "bcpd": run_bcpd}
+SYMMETRIES = {"torus": torus_turns}  # bodies with a symmetry: the error modulo it too
+
+
+def modulo_symmetry(shape, src, tgt, move, pairs, h) -> float:
+    """The median pair error (target spacings) under the best of the body's symmetries
+    g (the truth taken as where ``move`` takes g(source)): what is identifiable of a
+    correspondence on a symmetric body; NaN for a body with none known."""
+    if shape not in SYMMETRIES:
+        return float("nan")
+    i, j = pairs[:, 0], pairs[:, 1]
+    return min(float(np.median(np.linalg.norm(tgt[j] - move(src[i] @ g.T), axis=1))) / h
+               for g in SYMMETRIES[shape]())
+
+
 # The kinds of case beside the base one (a random 5-15 % warp, 80 % of the target kept at
 # random, the target sampled at the source's points): make_case's keyword arguments.
 VARIANTS = {
@@ -217,14 +291,16 @@ VARIANTS = {
 
 def one(method: str, shape: str, m: int, angle: float, noise: float,
         variant: str = "base") -> dict:
-    src, tgt, truth = make_case(shape, m, angle, noise, **VARIANTS[variant])
+    src, tgt, truth, move = make_case(shape, m, angle, noise, carry=True,
+                                      **VARIANTS[variant])
     t0 = time.perf_counter()
-    pairs = (run_modalmorph if method == "modalmorph" else run_cpd)(src, tgt)
+    pairs = PEERS[method](src, tgt)
     seconds = time.perf_counter() - t0
     err, h = errors(src, tgt, truth, pairs)
     paired = err[np.isfinite(err)]
     best = cKDTree(tgt).query(truth)[0] / h  # the nearest target point: no pairing does better
     return dict(best=float(np.median(best)), med=float(np.median(paired)),
+                sym=modulo_symmetry(shape, src, tgt, move, pairs, h),
                 p90=float(np.percentile(paired, 90)),
                 paired=len(paired) / len(err), w1=float(np.mean(err <= 1)),
                 w3=float(np.mean(err <= 3)), s=seconds,
@@ -244,28 +320,27 @@ def child(args, method, shape, m, angle, variant="base") -> dict | str:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def available(method: str) -> bool:
-    """Whether a peer's package is installed (pycpd: ``pip install pycpd``)."""
-    if method != "cpd":
-        return True
-    try:
-        import pycpd  # noqa: F401
-    except ImportError:
-        return False
-    return True
+def available(method: str, shape: str) -> bool:
+    """Whether a peer's package (pycpd: ``pip install pycpd``; probreg) and the shape's
+    (trimesh, pymeshlab) are installed."""
+    need = {"cpd": ["pycpd"], "bcpd": ["probreg"]}.get(method, [])
+    need += {"torus": ["trimesh"]}.get(shape, ["trimesh", "pymeshlab"] if shape in PACKAGED
+                                              else [])
+    return all(importlib.util.find_spec(name) is not None for name in need)
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--child", nargs="+", help=argparse.SUPPRESS)
     p.add_argument("--shapes", default="bunny,blob",
-                   help="of bunny, blob, torus, twisted")
+                   help="of bunny, blob, torus, twisted, " + ", ".join(PACKAGED))
     p.add_argument("--sizes", default="500,2000,10000,50000,100000")
     p.add_argument("--angles", default="0,30,90,180")
     p.add_argument("--variants", default="base", help=f"of {', '.join(VARIANTS)}")
-    p.add_argument("--methods", default="modalmorph,cpd")
+    p.add_argument("--methods", default="modalmorph,cpd,bcpd", help="of " + ", ".join(PEERS))
     p.add_argument("--noise", type=float, default=0.01, help="fraction of the size")
-    p.add_argument("--cpd-up-to", type=int, default=2000)
+    p.add_argument("--cpd-up-to", type=int, default=2000, help="the peers (CPD, BCPD) "
+                   "run up to this many points")
     p.add_argument("--timeout", type=float, default=600.0)
     args = p.parse_args(argv)
     if args.child:
@@ -276,7 +351,7 @@ def main(argv=None) -> int:
           f"{WARP[0]:.0%}-{WARP[1]:.0%}; variants: {VARIANTS}; error in target spacings; "
           f"peak RSS in MB")
     print(f"{'shape':>7} {'variant':>7} {'points':>7} {'angle':>5} {'method':>10} {'best':>5} "
-          f"{'med':>6} "
+          f"{'med':>6} {'sym':>5} "
           f"{'p90':>6} {'paired':>6} {'<=1':>5} {'<=3':>5} {'time s':>7} {'peak':>6} "
           f"{'load':>5}",
           flush=True)
@@ -286,12 +361,13 @@ def main(argv=None) -> int:
                 for angle in map(float, args.angles.split(",")):
                     for method in args.methods.split(","):
                         head = f"{shape:>7} {variant:>7} {m:>7} {angle:>5.0f} {method:>10}"
-                        if method == "cpd" and m > args.cpd_up_to:
+                        if method != "modalmorph" and m > args.cpd_up_to:
                             continue
                         r = (child(args, method, shape, m, angle, variant)
-                             if available(method) else "not installed")
+                             if available(method, shape) else "not installed")
                         print(f"{head} {r:>6}" if isinstance(r, str) else
-                              f"{head} {r['best']:>5.2f} {r['med']:>6.2f} {r['p90']:>6.2f} "
+                              f"{head} {r['best']:>5.2f} {r['med']:>6.2f} {r['sym']:>5.2f} "
+                              f"{r['p90']:>6.2f} "
                               f"{r['paired']:>6.2f} "
                               f"{r['w1']:>5.2f} {r['w3']:>5.2f} {r['s']:>7.2f} "
                               f"{r['peak']:>6.0f} {r['load']:>5.1f}", flush=True)

@@ -46,7 +46,7 @@ PHANTOMS = {
     "hypokinetic 180-240": dict(sector=(180.0, 240.0, 0.5)),
 }
 TRUTH_NODES = (720, 4000)  # endocardial chords, epicardial nodes of the exact motion
-HEARTS = Path("/work/shared/data/heart")
+HEARTS = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "heart"
 
 
 def truth(ph) -> dict:
