@@ -4,9 +4,9 @@ For each size, a heart pair of the shared data (ED -> ES, resampled by arc lengt
 many nodes) is matched and morphed with default options (``modalmorph.morph``) three ways
 in the same process: the library's policy (``modalmorph.threads``), forced to one BLAS
 thread, and forced to every core (what numpy does without the policy). Median of
-``--repeat`` runs each, after one warm-up. ``--busy N`` first starts N processes that spin
-on the cores (a busy machine), and stops them at the end. The ratio columns are the policy's
-time over the others' (<= 1: the policy is not slower).
+``--repeat`` interleaved rounds, after one warm-up round. ``--busy N`` first starts N
+processes that spin on the cores (a busy machine), and stops them at the end. The ratio
+columns are the policy's time over the others' (<= 1: the policy is not slower).
 
     PYTHONPATH=src python benchmarks/threads.py [--sizes 70,250,1000,4000] [--repeat 5]
     PYTHONPATH=src python benchmarks/threads.py --busy 2
@@ -25,6 +25,9 @@ import modalmorph as mm
 from modalmorph.core.shape import resample
 from modalmorph.threads import blas_threads, set_blas_threads
 
+# Seconds to wait after a run on every core: OpenBLAS's idle workers spin for about 0.1 s
+# (its THREAD_TIMEOUT of 2^28 cycles) before they sleep.
+SPIN_PAUSE = 0.3
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "heart"
 
 
@@ -40,17 +43,25 @@ def heart_pair(nodes: int):
 
 
 def timed(a, b, threads, repeat: int) -> float:
-    set_blas_threads(threads)
-    try:
-        mm.morph(a, b)  # warm-up
-        times = []
-        for _ in range(repeat):
-            start = time.perf_counter()
-            mm.morph(a, b)
-            times.append(time.perf_counter() - start)
-        return statistics.median(times)
-    finally:
-        set_blas_threads(None)
+    """Median seconds of ``mm.morph(a, b)`` under each BLAS thread setting of
+    ``threads`` (None: the policy), in interleaved rounds so that load that comes and goes
+    falls on every setting alike; after a run on every core, a pause lets OpenBLAS's
+    workers stop spinning (they busy-wait for a while after a call and would slow the
+    next setting's run on a 2-core machine)."""
+    times = {t: [] for t in threads}
+    for round_ in range(repeat + 1):  # round 0 warms up
+        for t in threads:
+            set_blas_threads(t)
+            try:
+                start = time.perf_counter()
+                mm.morph(a, b)
+                if round_:
+                    times[t].append(time.perf_counter() - start)
+            finally:
+                set_blas_threads(None)
+            if t is not None and t > 1:
+                time.sleep(SPIN_PAUSE)
+    return [statistics.median(times[t]) for t in threads]
 
 
 def _spin(stop):
@@ -78,9 +89,7 @@ def main(argv=None) -> int:
     try:
         for nodes in (int(s) for s in args.sizes.split(",")):
             a, b = heart_pair(nodes)
-            one = timed(a, b, 1, args.repeat)
-            every = timed(a, b, cores, args.repeat)
-            policy = timed(a, b, None, args.repeat)
+            one, policy, every = timed(a, b, (1, None, cores), args.repeat)
             print(f"{nodes:>6} {blas_threads(nodes):>7} {one:8.4f} {every:8.4f} "
                   f"{policy:8.4f} {policy / one:6.2f} {policy / every:6.2f}")
     finally:
