@@ -296,6 +296,11 @@ class _DaskRunner:
                 unreachable = self._check(unreachable)
                 for future in finished:
                     self._finished(future, pending.pop(future), done)
+        except OSError:  # a call to the scheduler failed (reset) as the scheduler went away
+            if self._losing(LOST_AFTER_S):
+                raise SchedulerLost(f"the Dask scheduler {self.client.scheduler.address} "
+                                    f"was lost") from None
+            raise
         finally:  # stopped: what has not started will not
             with contextlib.suppress(Exception):
                 self.client.cancel(list(pending))
@@ -322,9 +327,10 @@ class _DaskRunner:
             row = failed_row(item, exc)  # KilledWorker: the item killed 3 workers
         done(item, row)
 
-    def _losing(self) -> bool:
-        """Whether the client loses its scheduler (it says so within a second)."""
-        deadline = time.monotonic() + 2.0
+    def _losing(self, within: float = 2.0) -> bool:
+        """Whether the client loses its scheduler (it says so within a second; ``within``
+        seconds at most are waited for it)."""
+        deadline = time.monotonic() + within
         while self.client.status == "running" and time.monotonic() < deadline:
             time.sleep(0.05)
         return self.client.status != "running"
