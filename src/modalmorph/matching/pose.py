@@ -58,7 +58,15 @@ _DISTINCT = 20.0  # degrees apart at least (else the bone at 30 deg: 16 of one w
 # (1.18). The total counts what one object lacks too (the blob cut at 20 000 points
 # 111.6; with the cheapest 60 % of the pairs 6.7, but the uneven bone 43.4).
 _CLOSE = 1.05
-_ICP_ROUNDS = 30  # rounds of the second stage, on _COARSE_NODES_CLOUD nodes
+_ICP_ROUNDS = 30  # rounds of the second stage, on _ICP_NODES nodes
+# Nodes of each object in the second stage. benchmarks/match3d.py, median in target
+# spacings, 256 / 512 / 1024: blob 100 000 at 30 deg 1.46 / 0.90 / 0.86 (with 256 the
+# best ICP pose lay 4.4 deg from the truth's best rotation and the modal pose, 2.3 deg,
+# scored 7 % worse; with 1024 the pose chosen lay 1.1 deg from it); 1000 points, blob
+# cut 180 deg 0.99 / 0.34 / 0.31, blob uneven 30 deg 2.52 / 2.19 / 1.65, the bunny and
+# blob base, cut, uneven at 30 and 180 deg otherwise within 0.07; 1000 points, 0.66 ->
+# 1.0 s a case (about 0.5 s more for the second stage, whatever the size).
+_ICP_NODES = 1024
 _TRIM = 2.0  # coarse target spacings (3: the bone cut, 180 deg, 12.0; 2: 0.41; 1.5: same)
 
 @dataclass(frozen=True, eq=False)
@@ -264,7 +272,7 @@ def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray, modal: Similarity) 
     identity with ``rotation="auto"``, the principal axes' rotation with each of the 24
     turns that permute and sign them, ``_STARTS`` turns spread over all rotations), first
     briefly on ``_SCOUT_NODES`` nodes, then the ``_FINALISTS`` best fully on
-    ``_COARSE_NODES_CLOUD``. The score counts where the surfaces lie, not how densely
+    ``_ICP_NODES``. The score counts where the surfaces lie, not how densely
     they are sampled nor what one of them lacks, so that uneven sampling and partial
     overlap cannot make a wrong pose cheaper; but it hardly tells the poses of a
     near-symmetric body apart, so of the poses scoring within ``_CLOSE`` of the best
@@ -282,7 +290,7 @@ def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray, modal: Similarity) 
     scouts = [_trimmed_icp(xs, ys, Similarity(r, 1.0, zero), trim, rotate, _SCOUT_ROUNDS)
               for r in rots]
     best = _distinct([scouts[r][1] for r in sorted(range(len(rots)), key=lambda r: scouts[r][0])])
-    (x, y, trim) = (*_spread(src, _COARSE_NODES_CLOUD)[:1], *_spread(tgt, _COARSE_NODES_CLOUD))
+    (x, y, trim) = (*_spread(src, _ICP_NODES)[:1], *_spread(tgt, _ICP_NODES))
     tried = [_trimmed_icp(x, y, sim, trim, rotate) for sim in best]
     tried.append((_score(x, y, modal, trim), modal))
     low = min(score for score, _ in tried)
