@@ -70,8 +70,8 @@ _ICP_ROUNDS = 30  # rounds of the second stage, on _ICP_NODES nodes
 # 0.31 / 0.31 / 0.31, twisted 30 deg 2.17 / 2.00 / 1.32 / 1.32, but bone uneven 180 deg
 # 1.41 / 13.0 / 1.41 / 1.36, twisted cut 30 and uneven 90 deg 1.76, 2.48 / 1.77, 2.32 /
 # 21.4, 30.2 / 1.81, 2.28; kept worse: twisted 180 deg 1.46 -> 2.11, twisted uneven
-# 180 deg 3.14 -> 4.60, bone uneven 90 deg 14.5 -> 48.4 (wrong either way); the
-# others within 0.16. 1000 points: 0.66 -> about 1.0 s a case.
+# 180 deg 3.14 -> 4.60, bone uneven 90 deg 14.5 -> 48.4 (wrong either way); the rest
+# in docs/issue25/scale.md. 1000 points: 0.66 -> about 1.0 s a case.
 _ICP_NODES = 1024
 _TRIM = 2.0  # coarse target spacings (3: the bone cut, 180 deg, 12.0; 2: 0.41; 1.5: same)
 
