@@ -174,3 +174,12 @@ def test_condition_bound_is_an_upper_bound(hand200, sigma):
     assert info == info2 == 0
     bound = condition_bound(gamma, l_inv)
     assert model.gamma_condition * (1 - 1e-9) <= bound <= model.m * model.gamma_condition
+
+
+def test_coincident_nodes_are_named():
+    """Two nodes closer than the narrowest width: the error names them, not sigma."""
+    t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    ring = np.c_[np.cos(t), np.sin(t)]
+    ring[10] = ring[9] + 1e-9
+    with pytest.raises(ValueError, match="nodes 9 and 10 .* nearly coincident"):
+        FEModel(ring, sigma=None).modes()

@@ -278,6 +278,13 @@ def singular_gram(shape, sigma_rel: float, cond: float | None = None,
     singular (condition number ``cond`` when measured), naming the width that works."""
     shape = as_shape(shape)
     what = f" (condition number {cond:.1e})" if cond is not None else ""
+    gap, i, j = _closest_nodes(shape)
+    if gap < MIN_SIGMA:  # closer than the narrowest width: no sigma separates them
+        return ModelError(
+            f"nodes {i} and {j} of this {shape.m}-node shape are {gap:.2g} x the mean node "
+            f"spacing apart, closer than the narrowest Gaussian width ({MIN_SIGMA:g}): "
+            f"nearly coincident nodes make the Gram matrix numerically singular{what} at "
+            f"any sigma. Remove the duplicate or resample the shape evenly.{detail}")
     works = auto_sigma(shape, sigma_rel)
     hint = (f"the largest sigma that keeps it well conditioned here is about {works:.2g}; "
             if works < sigma_rel else "")
@@ -285,3 +292,14 @@ def singular_gram(shape, sigma_rel: float, cond: float | None = None,
         f"sigma={sigma_rel:g} (x mean node spacing) is too large for this {shape.m}-node "
         f"shape: its Gaussian Gram matrix is numerically singular{what}. Use a smaller sigma "
         f"({hint}sigma=None chooses one per shape).{detail}")
+
+
+def _closest_nodes(shape) -> tuple[float, int, int]:
+    """The two nearest nodes of ``shape`` and their distance in mean node spacings."""
+    from scipy.spatial import cKDTree
+
+    x = shape.normalized
+    dist, near = cKDTree(x).query(x, k=2)
+    i = int(np.argmin(dist[:, 1]))
+    j = int(near[i, 1])
+    return float(dist[i, 1] / shape.spacing), min(i, j), max(i, j)
