@@ -430,11 +430,13 @@ def test_track_figures_name_the_frames_and_the_legend_hides_no_curve():
     ax = plot_trajectories(track)
     assert [t.get_text() for t in ax.get_legend().get_texts()] == ["frame_1", "frame_3"]
     ax.figure.canvas.draw()
-    bar = ax.figure.axes[-1]
-    assert [t.get_text() for t in bar.get_yticklabels()] == list(track.names)
+    bar = ax.figure.axes[-1]  # the names' differing parts, the pattern in the label
+    assert [t.get_text() for t in bar.get_yticklabels()] == ["1", "2", "3"]
+    assert bar.get_ylabel() == "frame (frame_*)"
     ax = plot_track_curves(track)
     ax.figure.canvas.draw()
-    assert [t.get_text() for t in ax.get_xticklabels()] == list(track.names)
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["1", "2", "3"]
+    assert ax.get_xlabel() == "frame (frame_*)"
     legend = ax.get_legend().get_window_extent()
     assert legend.y0 >= ax.get_window_extent().y1 - 1  # above the axes, over no data
     ax = plot_shapes(SimpleNamespace(**vars(circle_to_ellipse(steps=2)), names=track.names))
@@ -453,3 +455,16 @@ def test_track_animation_frames_are_titled_by_their_names(tmp_path):
     del morph.names
     scene = _Scene(morph, "energy", background=False, dpi=30)
     assert scene.caption(2) == "step 2 / 2, t = 0.2 / $\\omega_{ref}$"
+
+
+def test_frame_names_shortened_for_figures():
+    """Figures name frames by what differs: no shared folder, no shared prefix/suffix."""
+    from modalmorph.figures._draw import short_names
+    from modalmorph.figures.track import differing_parts
+
+    names = short_names(["/data/lv/SC-03-0009.csv", "/data/lv/SC-03-0020.csv"])
+    assert names == ("SC-03-0009.csv", "SC-03-0020.csv")
+    assert differing_parts(names) == (("0009", "0020"), "SC-03-*.csv")
+    assert differing_parts(["frame 0", "frame 12"]) == (("0", "12"), "frame *")
+    assert differing_parts(["a.csv"]) == (("a.csv",), "")
+    assert short_names(["x.npy[0]", "x.npy[1]"]) == ("x.npy[0]", "x.npy[1]")

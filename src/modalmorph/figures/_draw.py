@@ -7,6 +7,7 @@ them; users import from :mod:`modalmorph.figures`.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -46,6 +47,20 @@ ENERGY_COLORS = ("#3b4cc0", "0.6", "#b40426")  # coolwarm's ends; its 87 % grey 
 # horse mask and OFF egg the largest |e_i| was 1.1-5.9x this range; scaled to it, most grey.
 ENERGY_RANGE = (2.0, 98.0)
 NO_DEFORMATION = 1e-12  # |e_i| below this (k_ref L^2) is round-off: a translation gave 2e-14
+
+
+def short_names(names) -> tuple[str, ...]:
+    """Frame names as a figure shows them: file paths without the folder they all share
+    (``/data/lv/f01.csv`` -> ``f01.csv``), other names as they are."""
+    names = tuple(map(str, names))
+    folders = [os.path.dirname(n) for n in names]
+    if not names or not all(folders):
+        return names
+    try:
+        common = os.path.commonpath(folders)
+    except ValueError:  # absolute and relative paths mixed
+        return names
+    return tuple(os.path.relpath(n, common) for n in names)
 
 
 def import_matplotlib():

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._draw import short_names
+
 __all__ = ["plot_strain_curves", "plot_bullseye", "plot_wall", "SEGMENT_COLORS"]
 
 SEGMENT_COLORS = "tab10"  # segment s is colour s - 1 of this map (global: black)
@@ -127,7 +129,7 @@ def plot_wall(result, frames=None, *, fig=None):
         ax.set_xlim(box[0], box[2])
         ax.set_ylim(box[3], box[1])
         ax.set_aspect("equal")
-        ax.set_title(f"frame {f} ({result.names[f]})", fontsize=9)
+        ax.set_title(f"frame {f} ({short_names(result.names)[f]})", fontsize=9)
         unit = result.params.get("unit", "px")
         ax.set_xlabel(f"x ({unit})")
         ax.set_ylabel(f"y ({unit})")

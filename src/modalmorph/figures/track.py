@@ -3,6 +3,7 @@ trajectories, the strain and energy curves, every frame coloured by its local en
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -22,12 +23,18 @@ from ._draw import (
     line_collection,
     new_axes,
     save_draws,
+    short_names,
     view_of,
 )
 from .animation import animate
 from .morph import plot_shapes
 
 MAX_NAMED_FRAMES = 12  # frames named one by one on an axis at most (longer names overlap)
+SLANT = 30  # degrees of the frame names under a chart's axis when they are long
+# Width of a tick label's character and the height of the axis label below the names, in
+# points, at matplotlib's default 10 pt sans-serif (DejaVu Sans averages 6.1 pt a
+# character over file names such as "SC-HF-NI-03-0009.csv", 20 characters, 122 pt).
+CHAR_PT, LABEL_PT = 6.2, 30.0
 
 
 def _as_morph(track):
@@ -37,7 +44,7 @@ def _as_morph(track):
     return SimpleNamespace(shapes=track.points, node_energy=track.node_energy,
                            loads=np.zeros_like(track.points), source=track.frames[0],
                            target=track.frames[-1], similarity=None,
-                           names=tuple(track.names))
+                           names=short_names(track.names))
 
 
 def _name_frames(axis, names, *, at_most: int = MAX_NAMED_FRAMES) -> None:
@@ -51,6 +58,38 @@ def _name_frames(axis, names, *, at_most: int = MAX_NAMED_FRAMES) -> None:
         axis.set_major_locator(MaxNLocator(integer=True, nbins=at_most))
     axis.set_major_formatter(FuncFormatter(
         lambda v, _: names[int(round(v))] if 0 <= round(v) < len(names) else ""))
+
+
+def _slant_names(ax, longest: int) -> None:
+    """Frame names slanted under the axis, ending at their ticks, with the room they
+    take below it (the Axes shortened from below when its margin is too small)."""
+    ax.tick_params(axis="x", labelrotation=SLANT)
+    for label in ax.xaxis.get_ticklabels():
+        label.set_horizontalalignment("right")
+    fig = ax.figure
+    size = CHAR_PT * longest / 72  # inches
+    below = (size * np.sin(np.radians(SLANT)) + LABEL_PT / 72) / fig.get_figheight()
+    left = size * np.cos(np.radians(SLANT)) / fig.get_figwidth()  # the first name's reach
+    x0, y0, width, height = ax.get_position().bounds
+    x1, y1 = x0 + width, y0 + height
+    ax.set_position([max(x0, left), max(y0, below), x1 - max(x0, left), y1 - max(y0, below)])
+
+
+def differing_parts(names) -> tuple[tuple[str, ...], str]:
+    """The part of each name that differs from the others, and the pattern they share
+    (``f-0009.csv``, ``f-0020.csv`` -> ``("0009", "0020")``, ``"f-*.csv"``), cut at
+    non-alphanumeric characters; the names and ``""`` when nothing is shared."""
+    names = tuple(names)
+    if len(names) < 2:
+        return names, ""
+    head = os.path.commonprefix(names)
+    tail = os.path.commonprefix([n[::-1] for n in names])[::-1]
+    head = head[:max((k + 1 for k, c in enumerate(head) if not c.isalnum()), default=0)]
+    tail = tail[min((k for k, c in enumerate(tail) if not c.isalnum()), default=len(tail)):]
+    parts = tuple(n[len(head):len(n) - len(tail)] for n in names)
+    if not (head or tail) or not all(parts):
+        return names, ""
+    return parts, f"{head}*{tail}"
 
 
 def plot_trajectories(track, *, every: int = 1, background: bool = True, ax=None):
@@ -80,11 +119,14 @@ def plot_trajectories(track, *, every: int = 1, background: bool = True, ax=None
         if len(edges) and faces is None:
             ax.add_collection(line_collection(pts[edges], ax, colors=color, linewidths=0.8,
                                               zorder=3))
-        ax.scatter(*pts.T, s=6, c=color, linewidths=0, zorder=4, label=track.names[f])
+        ax.scatter(*pts.T, s=6, c=color, linewidths=0, zorder=4,
+                   label=short_names(track.names)[f])
     handles, labels = ax.get_legend_handles_labels()
     legend_above(ax, handles, labels)
-    cbar = ax.figure.colorbar(lines, ax=ax, label="frame", shrink=0.8)
-    _name_frames(cbar.ax.yaxis, track.names)
+    ticks, pattern = differing_parts(short_names(track.names))
+    cbar = ax.figure.colorbar(lines, ax=ax, shrink=0.8,
+                              label=f"frame ({pattern})" if pattern else "frame")
+    _name_frames(cbar.ax.yaxis, ticks)
     finish_axes(ax, points.reshape(-1, dim), view, image=image)
     return ax
 
@@ -119,10 +161,14 @@ def plot_track_curves(track, *, ax=None):
     ax.plot(frames, 100 * track.strain, color="black", lw=2.2, label="global")
     ax.axhline(0, color="0.7", lw=0.8)
     ax.set_xlabel("frame")
-    _name_frames(ax.xaxis, track.names)
-    if track.n_frames <= MAX_NAMED_FRAMES and max(map(len, track.names)) > 6:
-        ax.tick_params(axis="x", labelrotation=30)
-    ax.set_ylabel(f"strain against {track.names[0]} (%)")
+    names = short_names(track.names)
+    ticks, pattern = differing_parts(names)
+    if pattern:
+        ax.set_xlabel(f"frame ({pattern})")
+    _name_frames(ax.xaxis, ticks)
+    if track.n_frames <= MAX_NAMED_FRAMES and max(map(len, ticks)) > 6:
+        _slant_names(ax, max(map(len, ticks)))
+    ax.set_ylabel(f"strain against {names[0]} (%)")
     right = ax.twinx()
     legend, label = energy_labels(track)
     right.plot(frames, track.cumulative_energy, color=TARGET_COLOR, ls="--", lw=1.5,
