@@ -49,6 +49,11 @@ ENERGY_RANGE = (2.0, 98.0)
 NO_DEFORMATION = 1e-12  # |e_i| below this (k_ref L^2) is round-off: a translation gave 2e-14
 
 
+# A legend entry's width in points: a character of its label at "small" (8.3 pt; DejaVu
+# Sans averages 5.1 pt a character over frame names), plus the handle and the spacings.
+LEGEND_CHAR_PT, LEGEND_HANDLE_PT = 5.2, 32.0
+
+
 def short_names(names) -> tuple[str, ...]:
     """Frame names as a figure shows them: file paths without the folder they all share
     (``/data/lv/f01.csv`` -> ``f01.csv``), other names as they are."""
@@ -96,10 +101,13 @@ def new_figure(dim: int, layout: str = "bar"):
 
 
 def legend_above(ax, handles, labels, **kw):
-    """A frameless legend just above the axes, where it hides no data."""
+    """A frameless legend just above the axes, where it hides no data: up to 3 columns,
+    as many as the figure's width holds for its longest label."""
+    entry = LEGEND_CHAR_PT * max(map(len, labels), default=0) + LEGEND_HANDLE_PT
+    fits = int(ax.figure.get_figwidth() * 72 // max(entry, 1.0))
     return ax.legend(handles, labels, loc="lower center", bbox_to_anchor=(0.5, 1.0),
-                     ncols=min(len(handles), 3), frameon=False, fontsize="small",
-                     handlelength=1.6, columnspacing=1.2, **kw)
+                     ncols=max(1, min(len(handles), 3, fits)), frameon=False,
+                     fontsize="small", handlelength=1.6, columnspacing=1.2, **kw)
 
 
 def is_3d(ax) -> bool:
