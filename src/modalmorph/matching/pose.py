@@ -304,7 +304,14 @@ def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray, modal: Similarity) 
     close = [_rigid_rounds(costs, sub, sim, rotate)[1] for score, sim in tried
              if score <= _CLOSE * low]
     totals = [trusted_pairs(costs, sim.apply(costs.x), sub)[1] for sim in close]
-    sim = close[int(np.argmin(totals))]
+    best = int(np.argmin(totals))
+    if p.rotation == "auto":  # the common frame, as in 2D: kept unless far costlier
+        turn = [np.degrees(np.arccos(np.clip((np.trace(s.rotation) - 1) / 2, -1, 1)))
+                for s in close]
+        near = [k for k in range(len(close)) if turn[k] <= _COMMON_ANGLE]
+        if near and min(totals[k] for k in near) <= _COMMON_MARGIN * totals[best]:
+            best = min(near, key=totals.__getitem__)
+    sim = close[best]
     return Pose(sim, sim, False, rotate, False)
 
 
