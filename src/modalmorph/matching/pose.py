@@ -284,7 +284,9 @@ def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray, modal: Similarity) 
     near-symmetric body apart, so of the poses scoring within ``_CLOSE`` of the best
     (the pose of :func:`_assignment_pose`, ``modal``, among them), each settled by the
     same rigid rounds of assignment as ``modal`` (:func:`_rigid_rounds`), the one of
-    least modal total (the search on ``sub``, modal signatures included) wins."""
+    least modal total (the search on ``sub``, modal signatures included) wins; with
+    ``rotation="auto"`` one within ``_COMMON_ANGLE`` of the identity wins instead unless
+    its total exceeds ``_COMMON_MARGIN`` x the least (the common frame, as in 2D)."""
     src, tgt = p.src, p.tgt
     rotate = p.rotation != "none"
     rots = np.eye(3)[None]
