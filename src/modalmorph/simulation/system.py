@@ -220,10 +220,12 @@ _REUSED: ContextVar[list | None] = ContextVar("reused_systems", default=None)
 
 @contextmanager
 def reuse_systems():
-    """Within it, :meth:`ModalSystem.build` reuses the model, modes and integrator of a
-    system built before on the same :class:`Shape` object with equal options (a sequence
-    morphed from one frame: ``track(..., reference="first")``); the results are those of
-    a fresh build, bit for bit. What it holds is released on leaving."""
+    """Within it, :meth:`ModalSystem.build` reuses the model, modes and integrator of the
+    first system built in it, for the same :class:`Shape` object with equal options (a
+    sequence morphed from one frame: ``track(..., reference="first")``; the frames redone
+    from another source are built afresh and not kept, so memory stays one system); the
+    results are those of a fresh build, bit for bit. What it holds is released on
+    leaving."""
     token = _REUSED.set([])
     try:
         yield
@@ -240,7 +242,7 @@ def _cached(source: Shape, o: MorphOptions) -> dict | None:
 
 def _remember(source: Shape, o: MorphOptions, part: dict) -> None:
     reused = _REUSED.get()
-    if reused is not None:
+    if reused is not None and not reused:  # the first system only: bounded memory
         reused.append((source, o, part))
 
 
