@@ -85,8 +85,8 @@ COARSE_CLOUD = 3000  # at most (100 000 points: error 0.88-0.95 spacings, 1000 n
 # 54 CPU-s; cell means instead of even subsets 6.2, random subsets 5.2; one more level of
 # refine on all the nodes after the subsets', cubes a subset spacing wide: 4.0, 46 CPU-s).
 FINE_CLOUD = 100_000
-# Subset nodes whose moves carry a node of such a set (inverse-distance weights): the
-# nodes so carried land as well as the subset's own (1M blob: 3.79 and 3.82 spacings).
+# Coarse or subset nodes whose moves carry a node (inverse-distance weights): the nodes so
+# carried land as well as the subset's own (1M blob: 3.79 and 3.82 spacings).
 CARRY = 4
 ALTERNATION_NODES = 400  # nodes in the alternation (at 1000: 0.52 -> 0.27 s, same precision)
 MAX_AFFINITY = 4e7  # largest m x n affinity the paper's searches build (memory; not measured)
@@ -215,10 +215,8 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions,
     sub_s = Shape(src.points[ci], closed=src.closed, ordered=src.ordered)
     sub_t = Shape(tgt.points[cj], closed=tgt.closed, ordered=tgt.ordered)
     *_, landed_c = _match_auto(sub_s, sub_t, n_modes, opts)
-    dist, near = cKDTree(sub_s.points).query(src.points, k=4)
-    w = 1.0 / np.maximum(dist, 1e-12 * src.size)
-    w /= w.sum(axis=1, keepdims=True)
-    landed = src.points + np.einsum("ik,ikd->id", w, (landed_c - sub_s.points)[near])
+    landed = src.points + _carried(sub_s.points, landed_c - sub_s.points, src.points,
+                                   src.size)
     j = cKDTree(tgt.points).query(landed)[1]
     gap = np.linalg.norm(tgt.points[j] - landed, axis=1)
     h = tgt.spacing * tgt.size * tgt.m / len(cj)  # the coarse target's node spacing
@@ -273,10 +271,17 @@ def _huge_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> n
     landed = tgt.to_normalized(sub_t.to_user(
         _cloud_landing(Shape(x, ordered=False), sub_t, n_modes, opts)))
     sim = align(x, landed)
-    dist, near = cKDTree(x).query(src.points, k=CARRY, workers=blas_threads(src.m))
-    w = 1.0 / np.maximum(dist, 1e-12 * src.size)
+    return sim.apply(src.points) + _carried(x, landed - sim.apply(x), src.points, src.size)
+
+
+def _carried(nodes: np.ndarray, moves: np.ndarray, points: np.ndarray, size: float
+             ) -> np.ndarray:
+    """The moves of ``nodes`` carried to ``points``: the inverse-distance mean of the moves
+    of each point's ``CARRY`` nearest nodes, (p, d)."""
+    dist, near = cKDTree(nodes).query(points, k=CARRY, workers=blas_threads(len(points)))
+    w = 1.0 / np.maximum(dist, 1e-12 * size)
     w /= w.sum(axis=1, keepdims=True)
-    return sim.apply(src.points) + np.einsum("ik,ikd->id", w, (landed - sim.apply(x))[near])
+    return np.einsum("ik,ikd->id", w, moves[near])
 
 
 def _match_paper(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions):
