@@ -205,14 +205,6 @@ def contour_pose(p: Problem) -> Pose:
     return Pose(align(xs, ys, rotate=rotate), align(xs, ys), reverse, rotate, common)
 
 
-def _cube_turns() -> np.ndarray:
-    """The 24 proper rotations that permute and sign the coordinate axes, (24, 3, 3)."""
-    out = [np.eye(3)[list(perm)] * np.array(signs)[:, None]
-           for perm in itertools.permutations(range(3))
-           for signs in itertools.product([1.0, -1.0], repeat=3)]
-    return np.array([r for r in out if np.linalg.det(r) > 0])
-
-
 def _trimmed_icp(x: np.ndarray, y: np.ndarray, sim: Similarity, trim: float,
                  rotate: bool, rounds: int = _ICP_ROUNDS) -> tuple[float, Similarity]:
     """Nearest-point rounds (ICP) from ``sim``, both ways (each placed source node to its
@@ -292,7 +284,8 @@ def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray, modal: Similarity) 
     rots = np.eye(3)[None]
     if rotate:
         ex, ey = _axes(src.normalized), _axes(tgt.normalized)
-        rots = np.concatenate([ey @ _cube_turns() @ ex.T, _even_turns(_STARTS)])
+        turns = Rotation.create_group("O").as_matrix()  # the 24 that permute and sign axes
+        rots = np.concatenate([ey @ turns @ ex.T, _even_turns(_STARTS)])
         rots = np.concatenate([np.eye(3)[None], rots]) if p.rotation == "auto" else rots
     zero = np.zeros(3)
     (xs, ys, trim) = (*_spread(src, _SCOUT_NODES)[:1], *_spread(tgt, _SCOUT_NODES))
@@ -308,8 +301,7 @@ def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray, modal: Similarity) 
     totals = [trusted_pairs(costs, sim.apply(costs.x), sub)[1] for sim in close]
     best = int(np.argmin(totals))
     if p.rotation == "auto":  # the common frame, as in 2D: kept unless far costlier
-        turn = [np.degrees(np.arccos(np.clip((np.trace(s.rotation) - 1) / 2, -1, 1)))
-                for s in close]
+        turn = np.degrees(Rotation.from_matrix([s.rotation for s in close]).magnitude())
         near = [k for k in range(len(close)) if turn[k] <= _COMMON_ANGLE]
         if near and min(totals[k] for k in near) <= _COMMON_MARGIN * totals[best]:
             best = min(near, key=totals.__getitem__)
