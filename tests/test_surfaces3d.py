@@ -48,7 +48,7 @@ def test_reduced_3d_model_moves_every_node_with_an_affine_exact_field():
     assert system.model.m == 100 and system.fit is not None
     turn = TURN.as_matrix() - np.eye(3)
     at_model = flat(system.model.points @ turn.T)
-    x = np.linalg.lstsq(system.modes.shapes, at_model, rcond=None)[0]
+    x = np.linalg.lstsq(system.basis.shapes, at_model, rcond=None)[0]  # its coordinates
     moved = nodes(system.field.dot(x), 3)
     assert np.abs(moved - system.source_n @ turn.T).max() < 1e-3
 

@@ -1,25 +1,32 @@
-"""The modes a simulation superposes and their values at every node (method.md §4, §7).
+"""The coordinates a simulation integrates in and their values at every node (method.md
+§4, §7).
 
 How many modes (:func:`mode_count`), the Rayleigh-Ritz augmentation of a truncated basis
 with smooth motions (:func:`superposed_modes`), the similarity motions of the model's
-nodes (:func:`similarity_fields`), and ``Phi`` at every node of the source, through the
-element's field for a reduced model (:class:`Field`).
+nodes (:func:`similarity_fields`), the two bases of the equations (:class:`ModeBasis`, the
+modes superposed; :class:`ElementBasis`, every mode's span without the eigenproblem), and
+``Phi`` at every node of the source, through the element's field for a reduced model
+(:class:`Field`, :class:`KronField`).
 """
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 from scipy import sparse
+from scipy.linalg import blas
 from scipy.spatial import cKDTree
 
 from ..core.affine import affine_fit_weights
 from ..core.model import FEModel
 from ..core.modes import Modes
+from ..core.solvers.dense import whitened
 from ..errors import OptionError
 
-__all__ = ["AFFINE_NEIGHBOURS", "COARSE_MAX", "Field", "SPARSE_MODES",
-           "affine_weights", "flat", "mode_count", "nodes", "similarity_fields",
-           "smooth_fields", "superposed_modes"]
+__all__ = ["AFFINE_NEIGHBOURS", "COARSE_MAX", "ElementBasis", "Field", "KronField",
+           "ModeBasis", "SPARSE_MODES", "affine_weights", "flat", "mode_count", "nodes",
+           "similarity_fields", "smooth_fields", "superposed_modes"]
 
 SPARSE_MODES = 100  # modes superposed by default with the sparse solvers (method.md §7)
 COARSE_MAX = 400  # nodes of the coarse copy whose modes augment a truncated basis (§7)
@@ -128,6 +135,11 @@ class Field:
         self.B = basis.reshape(d, -1, basis.shape[1])
         self.g = g
 
+    @property
+    def n(self) -> int:
+        """The number of coordinates (columns of ``Phi``)."""
+        return self.B.shape[2]
+
     def dot(self, x: np.ndarray) -> np.ndarray:
         """``Phi x``, (d*m,)."""
         parts = [b @ x for b in self.B]
@@ -156,3 +168,184 @@ class Field:
     def dense(self) -> np.ndarray:
         """``Phi`` itself, (d*m, n)."""
         return np.concatenate([b if self.g is None else self.g @ b for b in self.B])
+
+
+def _kron(f, v: np.ndarray, d: int) -> np.ndarray:
+    """``(I_d kron F) v`` for ``v`` (d*m,) or (d*m, k), ``F`` (p, m) applied by ``f`` to
+    the (m, d*k) array of every component's block side by side (one call)."""
+    k = v.shape[1] if v.ndim == 2 else 1
+    out = f(v.reshape(d, -1, k).transpose(1, 0, 2).reshape(-1, d * k))
+    out = out.reshape(-1, d, k).transpose(1, 0, 2).reshape(-1, k)
+    return out if v.ndim == 2 else out[:, 0]
+
+
+class KronField:
+    """The element basis at every node, ``Phi = s (I_d kron g C L^-T)``, applied without
+    forming it: ``L^-T`` (the whitening of :class:`ElementBasis`) by triangular products,
+    then ``C`` (``G``, to the model's nodes, or None) and ``g`` (a reduced model's field
+    or affine weights, sparse (m, mc), or None). The interface of :class:`Field`."""
+
+    def __init__(self, l_inv: np.ndarray, d: int, scale: float, *, g=None, inner=None):
+        self.l_inv, self.d, self.scale, self.g, self.inner = l_inv, d, scale, g, inner
+
+    @property
+    def n(self) -> int:
+        return self.d * len(self.l_inv)
+
+    def _right(self, X: np.ndarray) -> np.ndarray:
+        Y = blas.dtrmm(self.scale, self.l_inv, X, lower=1, trans_a=1)
+        Y = Y if self.inner is None else self.inner @ Y
+        return Y if self.g is None else self.g @ Y
+
+    def _left(self, V: np.ndarray) -> np.ndarray:
+        V = V if self.g is None else self.g.T @ V
+        V = V if self.inner is None else self.inner.T @ V
+        return blas.dtrmm(self.scale, self.l_inv, V, lower=1)
+
+    def dot(self, x: np.ndarray) -> np.ndarray:
+        """``Phi x``, (d*m,)."""
+        return _kron(self._right, x, self.d)
+
+    def tdot(self, v: np.ndarray) -> np.ndarray:
+        """``Phi^T v`` for v (d*m,)."""
+        return _kron(self._left, v, self.d)
+
+    def _block(self) -> np.ndarray:
+        """One component's ``Phi^T Phi``, (mc, mc)."""
+        if self.g is None:  # (G L^-T s)^T (G L^-T s)
+            P = blas.dtrmm(self.scale, self.l_inv, self.inner, side=1, lower=1, trans_a=1)
+            return P.T @ P
+        gtg = (self.g.T @ self.g)
+        gtg = gtg.toarray() if sparse.issparse(gtg) else gtg
+        if self.inner is not None:  # P^T gtg P with P = s G L^-T, Phi's block at the nodes
+            P = blas.dtrmm(self.scale, self.l_inv, self.inner, side=1, lower=1, trans_a=1)
+            return P.T @ gtg @ P  # (G gtg G first lost 1e-9 of a 3D fit's solve)
+        half = blas.dtrmm(self.scale, self.l_inv, gtg, lower=1)
+        return blas.dtrmm(self.scale, self.l_inv, half, side=1, lower=1, trans_a=1)
+
+    def gram(self) -> np.ndarray:
+        """``Phi^T Phi``, (n, n)."""
+        return np.kron(np.eye(self.d), self._block())
+
+    def sq_norm(self) -> float:
+        """The sum of the squares of ``Phi``, the trace of ``Phi^T Phi``."""
+        if self.g is None:
+            P = blas.dtrmm(self.scale, self.l_inv, self.inner, side=1, lower=1, trans_a=1)
+            return float(self.d * np.vdot(P, P))
+        return float(self.d * np.trace(self._block()))
+
+    def dense(self) -> np.ndarray:
+        """``Phi`` itself, (d*m, n)."""
+        return np.kron(np.eye(self.d), self._right(np.eye(len(self.l_inv))))
+
+
+class ModeBasis:
+    """The modes superposed as the coordinates of the equations (11)-(13):
+    ``Phi^T M Phi = I``, ``Phi^T K Phi = Omega^2`` (diagonal).
+
+    Attributes
+    ----------
+    model : FEModel
+    modes : Modes
+        The modes (:func:`superposed_modes`).
+    mass_modes : ndarray, shape (d*mc, n)
+        ``M Phi`` at the model's nodes (method.md §1).
+    """
+
+    def __init__(self, model: FEModel, modes: Modes):
+        self.model, self.modes = model, modes
+        self.mass_modes = model.mass_times_modes(modes)  # M Phi = (I kron A) M_g psi
+
+    @property
+    def n(self) -> int:
+        return self.modes.n
+
+    @property
+    def shapes(self) -> np.ndarray:
+        """``Phi`` at the model's nodes, (d*mc, n)."""
+        return self.modes.shapes
+
+    def stiffness(self) -> np.ndarray:
+        """``Phi^T K Phi``, (n, n): ``Omega^2`` (13)."""
+        return np.diag(self.modes.eigenvalues)
+
+    def at_nodes(self, x: np.ndarray) -> np.ndarray:
+        """``Phi x`` at the model's nodes."""
+        return self.modes.shapes @ x
+
+    def mass(self, y: np.ndarray) -> np.ndarray:
+        """``M Phi y`` at the model's nodes."""
+        return self.mass_modes @ y
+
+    def mass_t(self, u: np.ndarray) -> np.ndarray:
+        """``Phi^T M u`` for ``u`` (d*mc,) or (d*mc, k) at the model's nodes."""
+        return self.mass_modes.T @ u
+
+    def field(self, *, nodes=None, gaussian=None) -> Field:
+        """``Phi`` at other points: ``nodes`` (sparse (m, mc)) weights the model's nodal
+        values, ``gaussian`` (m, mc) is the element's field (1)-(4); neither: the
+        model's nodes."""
+        if gaussian is not None:
+            return Field(self.modes.gaussian, self.model.dim, gaussian)
+        return Field(self.modes.shapes, self.model.dim, nodes)
+
+
+class ElementBasis:
+    """Every mode's span without the eigenproblem: the element's Gaussian basis
+    whitened, ``psi = s (I kron L^-T)`` with ``Gamma = L L^T`` and ``s = rho^-1/2``, and
+    ``Phi = (I kron G) psi`` (method.md §4, "Every mode").
+
+    Orthonormal in the mass like the modes (``Phi^T M Phi = I``), so the springs, the
+    loads, the damping and Newmark read it as they read the modes; but its stiffness
+    ``Phi^T K Phi = s^2 (I kron L^-1) K_g (I kron L^-T)`` is a full matrix. With every mode
+    superposed the two are the same equations in coordinates an orthogonal matrix apart
+    (the eigenvectors ``Y`` of that stiffness: ``x_modes = Y^T x``), so the results are
+    equal to rounding, and the (d*m)^3 eigenproblem is not solved; :attr:`modes` solves
+    it when asked.
+    """
+
+    def __init__(self, model: FEModel):
+        self.model = model
+        self.L, self.l_inv, Kw = whitened(model)
+        rho = model.material.rho
+        self.scale, self.root = 1.0 / np.sqrt(rho), np.sqrt(rho)
+        self._stiffness = Kw / rho
+
+    @property
+    def n(self) -> int:
+        return self.model.dim * self.model.m
+
+    @cached_property
+    def modes(self) -> Modes:
+        """The model's modes, all of them (solved on first use: figures, tests)."""
+        return self.model.modes()
+
+    @cached_property
+    def shapes(self) -> np.ndarray:
+        """``Phi`` at the model's nodes, (d*mc, n)."""
+        return self.field().dense()
+
+    def stiffness(self) -> np.ndarray:
+        """``Phi^T K Phi``, (n, n), full."""
+        return self._stiffness
+
+    def at_nodes(self, x: np.ndarray) -> np.ndarray:
+        """``Phi x`` at the model's nodes: ``s (I kron G L^-T) x``."""
+        return _kron(lambda X: self.model.gram[0] @ blas.dtrmm(
+            self.scale, self.l_inv, X, lower=1, trans_a=1), x, self.model.dim)
+
+    def mass(self, y: np.ndarray) -> np.ndarray:
+        """``M Phi y = rho^1/2 (I kron A L) y`` at the model's nodes."""
+        Ly = _kron(lambda X: blas.dtrmm(self.root, self.L, X, lower=1), y, self.model.dim)
+        return self.model.solve_gram(Ly)
+
+    def mass_t(self, u: np.ndarray) -> np.ndarray:
+        """``Phi^T M u = rho^1/2 (I kron L^T A) u`` for ``u`` (d*mc,) or (d*mc, k)."""
+        return _kron(lambda X: blas.dtrmm(self.root, self.L, X, lower=1, trans_a=1),
+                     self.model.solve_gram(u), self.model.dim)
+
+    def field(self, *, nodes=None, gaussian=None) -> KronField:
+        """As :meth:`ModeBasis.field`."""
+        G = self.model.gram[0] if gaussian is None else None
+        return KronField(self.l_inv, self.model.dim, self.scale,
+                         g=gaussian if gaussian is not None else nodes, inner=G)

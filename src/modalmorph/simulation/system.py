@@ -24,7 +24,8 @@ from ..core.modes import Modes, rayleigh
 from ..core.shape import Shape, as_shape, check_pairs, coarsen
 from ..options import MorphOptions
 from .basis import (
-    Field,
+    ElementBasis,
+    ModeBasis,
     affine_weights,
     flat,
     mode_count,
@@ -35,7 +36,8 @@ from .basis import (
 from .result import Resolved
 
 __all__ = ["FIT_JITTER", "ModalSystem", "RANK_TOL", "reuse_systems", "several", "damping_matrix",
-           "elastic_stiffness", "frequency_range", "similarity_free", "springs"]
+           "elastic_stiffness", "frequency_range", "similarity_free", "similarity_free_full",
+           "springs"]
 
 RANK_TOL = 1e-10  # similarity fields whose modal image is below this fraction are dependent
 FIT_JITTER = 1e-12  # relative lift of Phi^T Phi's diagonal (rounding: 1e-16 x its mean)
@@ -60,11 +62,13 @@ class ModalSystem:
         The physical model.
     n_modes : int
         The modes asked of the model (before the Rayleigh-Ritz additions).
-    modes : Modes
-        The modes superposed (:func:`~modalmorph.simulation.basis.superposed_modes`).
-    mass_modes : ndarray, shape (d*mc, n)
-        ``M Phi`` at the model's nodes (method.md §1).
-    field : Field
+    basis : ModeBasis or ElementBasis
+        The coordinates of the equations: the modes superposed
+        (:func:`~modalmorph.simulation.basis.superposed_modes`), or, when that is every
+        mode of the exact model, the element's whitened basis, the same equations
+        without the eigenproblem (:class:`~modalmorph.simulation.basis.ElementBasis`);
+        ``M Phi`` and ``Phi^T M`` at the model's nodes (method.md §1).
+    field : Field or KronField
         ``Phi`` at every node of the source.
     spread : sparse array (m, mc) or None
         A reduced model's node energy spread over the source's nodes (None: not reduced).
@@ -99,9 +103,8 @@ class ModalSystem:
     reduced: Shape
     model: FEModel
     n_modes: int
-    modes: Modes
-    mass_modes: np.ndarray
-    field: Field
+    basis: ModeBasis | ElementBasis
+    field: object  # Field or KronField
     spread: object  # sparse array (m, mc) or None
     k_ref: float
     k_abs: float
@@ -137,6 +140,12 @@ class ModalSystem:
                    partners=getattr(loads, "partners", None), **part)
 
     @property
+    def modes(self) -> Modes:
+        """The modes superposed (with an :class:`ElementBasis`, all of the model's,
+        solved on first use)."""
+        return self.basis.modes
+
+    @property
     def size(self) -> float:
         """The model's length unit in the user's units (its shape's RMS radius)."""
         return self.reduced.size
@@ -151,7 +160,7 @@ class ModalSystem:
         if self.fit is not None:  # consistent, reduced: kappa (Phi^T Phi)^-1 Phi^T (T - X)
             return self.kappa * linalg.cho_solve(self.fit, self.field.tdot(u))
         if self.kappa is not None:  # consistent: kappa Phi^T M (T - X)
-            return self.kappa * (self.mass_modes.T @ u)
+            return self.kappa * self.basis.mass_t(u)
         return self.k_abs * self.field.tdot(u)
 
     def initial_coordinates(self, targets: np.ndarray) -> np.ndarray:
@@ -160,9 +169,9 @@ class ModalSystem:
         c_x = self.options.c_x
         U0 = c_x * flat(targets - self.source_n)  # (21): U0 = (c_x / k) R0
         if c_x == 0:
-            return np.zeros(len(self.modes.eigenvalues))
+            return np.zeros(self.basis.n)
         if self.spread is None:
-            return self.mass_modes.T @ U0
+            return self.basis.mass_t(U0)
         return np.linalg.lstsq(self.field.dense(), U0, rcond=None)[0]
 
     def energies(self, x: np.ndarray) -> tuple[float, np.ndarray]:
@@ -170,7 +179,7 @@ class ModalSystem:
         ``k_ref L^2``: ``x^T K_el x`` and ``u . (K U)`` with ``K U = M Phi K_el x``."""
         k_ref, K_el = self.k_ref, self.stiffness
         energy = float(x @ K_el @ x) / k_ref  # (22), x^T (Phi^T K Phi) x
-        e = node_energy(self.modes.shapes @ x, self.mass_modes @ (K_el @ x),
+        e = node_energy(self.basis.at_nodes(x), self.basis.mass(K_el @ x),
                         self.source.dim) / k_ref  # (25), model nodes
         return energy, (e if self.spread is None else self.spread @ e)
 
@@ -189,16 +198,18 @@ def _source_part(source: Shape, o: MorphOptions) -> dict:
     reduced = coarsen(source, o.model_nodes)
     model = FEModel(reduced, sigma=o.sigma, material=o.material, solver=o.solver)
     n_modes = mode_count(o.modes, model.dim * model.m, sparse=model.truncated)
-    modes = superposed_modes(model, n_modes)
-    mass_modes = model.mass_times_modes(modes)  # M Phi = (I kron A) M_g psi (method.md §1)
+    if n_modes == model.dim * model.m and not model.truncated:  # every mode: no eigh
+        basis = ElementBasis(model)
+    else:
+        basis = ModeBasis(model, superposed_modes(model, n_modes))
     # Reference scales: the stiffness and mass of one node in the Gaussian basis.
     k_ref, V = self_entries(model.width, source.dim, *model.lame)
     w_ref = np.sqrt(k_ref / (o.material.rho * V))
     # one spring per node; with a reduced model their total stiffness is kept the same
     k_abs = o.k * k_ref * model.m / source.m
     X1 = reduced.to_normalized(source.points)  # all in the model's normalised frame
-    field, spread = _nodal_field(model, modes, X1, reduced is not source)
-    stiffness = elastic_stiffness(modes, mass_modes, model.points, o.free_motion)
+    field, spread = _nodal_field(model, basis, X1, reduced is not source)
+    stiffness = elastic_stiffness(basis, model.points, o.free_motion)
     # a reduced 3D model pulls consistently too, by the modes' fit of the stretch (§7)
     fitted = o.loads == "consistent" and spread is not None and model.dim == 3
     kappa, spring = springs(field, k_abs, consistent=o.loads == "consistent"
@@ -208,8 +219,8 @@ def _source_part(source: Shape, o: MorphOptions) -> dict:
     uniform = kappa is not None and o.scheme == "implicit"  # K_mod = K_el + kappa I
     newmark = Newmark(K_mod, damping_matrix(o.damping, K_mod, spring, uniform=uniform),
                       o.dt / w_ref, o.alpha, o.delta)
-    return dict(reduced=reduced, model=model, n_modes=n_modes, modes=modes,
-                mass_modes=mass_modes, field=field, spread=spread, k_ref=k_ref,
+    return dict(reduced=reduced, model=model, n_modes=n_modes, basis=basis,
+                field=field, spread=spread, k_ref=k_ref,
                 k_abs=k_abs, source_n=X1, stiffness=stiffness, kappa=kappa,
                 newmark=newmark, fit=fit)
 
@@ -265,7 +276,7 @@ def _loads(source: Shape, target: Shape, X1, Y, pairs, o: MorphOptions, partners
                         closed=(source.closed, target.closed), rule=o.unmatched)
 
 
-def _nodal_field(model: FEModel, modes: Modes, points: np.ndarray, reduced: bool):
+def _nodal_field(model: FEModel, basis, points: np.ndarray, reduced: bool):
     """``Phi`` at the source's nodes ``points`` and, for a reduced model, the spread of
     each model node's energy over them (its field ``g_k`` at them, normalised). A
     reduced 2D model moves every node with the element's field; a 3D one with the
@@ -273,15 +284,15 @@ def _nodal_field(model: FEModel, modes: Modes, points: np.ndarray, reduced: bool
     ripples between the model's nodes, by up to 0.17 sizes under a shift of one size,
     and thin parts (the bunny's ears) cut through each other (method.md §7)."""
     if not reduced:
-        return Field(modes.shapes, model.dim), None
+        return basis.field(), None
     g_eval = model.field(points)  # u(x) = sum_k g_k(x) psi_k (1)-(4), truncated like G
     spread = g_eval / g_eval.sum(axis=0)
     if model.dim == 3:
-        return Field(modes.shapes, 3, affine_weights(model.points, points, model.width)), spread
-    return Field(modes.gaussian, model.dim, g_eval), spread
+        return basis.field(nodes=affine_weights(model.points, points, model.width)), spread
+    return basis.field(gaussian=g_eval), spread
 
 
-def _gram_factor(field: Field) -> tuple:
+def _gram_factor(field) -> tuple:
     """The Cholesky factor of ``Phi^T Phi``, its diagonal lifted by ``FIT_JITTER`` of its
     mean (a mode nearly invisible at the nodes would make it singular)."""
     gram = field.gram()
@@ -289,13 +300,16 @@ def _gram_factor(field: Field) -> tuple:
     return linalg.cho_factor(gram)
 
 
-def elastic_stiffness(modes: Modes, mass_modes: np.ndarray, points: np.ndarray,
-                      free_motion: str) -> np.ndarray:
-    """The elastic stiffness in modal coordinates: ``Omega^2`` (13), or with the
-    similarity motions of the model's nodes ``points`` free (``"similarity"``)."""
+def elastic_stiffness(basis, points: np.ndarray, free_motion: str) -> np.ndarray:
+    """The elastic stiffness in the coordinates of ``basis``: ``Phi^T K Phi`` (13), or
+    with the similarity motions of the model's nodes ``points`` free
+    (``"similarity"``)."""
     if free_motion == "none":
-        return np.diag(modes.eigenvalues)
-    return similarity_free(modes.frequencies, mass_modes.T @ similarity_fields(points))
+        return basis.stiffness()
+    B = basis.mass_t(similarity_fields(points))
+    if isinstance(basis, ModeBasis):
+        return similarity_free(basis.modes.frequencies, B)
+    return similarity_free_full(basis.stiffness(), B)
 
 
 def similarity_free(frequencies: np.ndarray, B: np.ndarray) -> np.ndarray:
@@ -313,13 +327,26 @@ def similarity_free(frequencies: np.ndarray, B: np.ndarray) -> np.ndarray:
     return (K + K.T) / 2
 
 
-def springs(field: Field, k_abs: float, *, consistent: bool):
+def similarity_free_full(K: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """:func:`similarity_free` for a full stiffness ``K`` (n, n) (not diagonal):
+    ``K - K B (B^T K B)^+ B^T K``, the same rank rule on the singular values of the
+    similarity fields' image (the square roots of the eigenvalues of ``B^T K B``)."""
+    KB = K @ B
+    lam, V = np.linalg.eigh(B.T @ KB)
+    root = np.sqrt(np.clip(lam, 0.0, None))
+    keep = root > RANK_TOL * root.max()
+    Z = KB @ (V[:, keep] / root[keep])
+    out = K - Z @ Z.T
+    return (out + out.T) / 2
+
+
+def springs(field, k_abs: float, *, consistent: bool):
     """The springs (19) in modal coordinates, ``(kappa, spring matrix)``: nodal,
     ``Phi^T R = k Phi^T (T - X)`` (kappa None); consistent, ``kappa x_T`` with ``x_T``
     the modes' fit of ``T - X`` and ``kappa`` their mean stiffness (the trace of
     ``Phi^T Phi`` is the sum of the squares of ``Phi``: the product itself is not formed)."""
     if consistent:  # x_T = Phi^T M (T - X)
-        n = field.B.shape[2]
+        n = field.n
         kappa = k_abs * field.sq_norm() / n
         return kappa, kappa * np.eye(n)
     return None, k_abs * field.gram()

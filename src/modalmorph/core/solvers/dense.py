@@ -9,7 +9,7 @@ from scipy.linalg import blas, lapack
 from ..element import MAX_CONDITION, condition_bound, singular_gram
 from ..modes import Modes
 
-__all__ = ["solve"]
+__all__ = ["solve", "whitened"]
 
 # Below this fraction of the spectrum, from this size up, LAPACK evr beats evd (method.md §7).
 _SUBSET_FRACTION, _SUBSET_MIN = 0.15, 200
@@ -29,6 +29,21 @@ def solve(model, n: int) -> Modes:
     ``gamma_condition`` and ``stiffness_gaussian``).
     """
     d, m = model.dim, model.m
+    _, Linv, Kw = whitened(model)
+    w2, Y = _eigh_lowest(Kw, n)
+    psi = np.matmul(Linv.T, Y.reshape(d, m, n))  # (I kron W) Y, W = L^-T
+    phi = np.matmul(model.gram[0], psi)  # Phi = (I kron G) psi
+    return Modes.unit_density(w2, psi.reshape(d * m, n), phi.reshape(d * m, n),
+                              model.material.rho, d)
+
+
+def whitened(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(L, L^-1, K_w)``: the lower Cholesky factor of Gamma, its inverse, and the
+    stiffness in the basis ``psi = I kron W``, ``W = L^-T`` (orthonormal in ``M_g`` of
+    unit density), ``K_w = (I kron W)^T K_g (I kron W)``, exactly symmetric, in Fortran
+    order (an eigensolver may overwrite it), after Gamma's conditioning check: a bound
+    from its factor (:func:`~modalmorph.core.element.condition_bound`), or where that is
+    not small enough its eigenvalues, refuse a sigma too large for the node set."""
     G, Gamma = model.gram
     L, info = lapack.dpotrf(Gamma, lower=1, clean=1)
     if info == 0:
@@ -38,12 +53,7 @@ def solve(model, n: int) -> Modes:
         cond = model.gamma_condition
         if not cond < MAX_CONDITION or info != 0:
             raise singular_gram(model.shape, model.sigma, cond)
-    W = Linv.T  # W^T Gamma W = I
-    w2, Y = _eigh_lowest(_whiten(model.stiffness_gaussian, Linv, d, m), n)
-    psi = np.matmul(W, Y.reshape(d, m, n))  # (I kron W) Y
-    phi = np.matmul(G, psi)  # Phi = (I kron G) psi
-    return Modes.unit_density(w2, psi.reshape(d * m, n), phi.reshape(d * m, n),
-                              model.material.rho, d)
+    return L, Linv, _whiten(model.stiffness_gaussian, Linv, model.dim, model.m)
 
 
 def _whiten(K: np.ndarray, Linv: np.ndarray, d: int, m: int) -> np.ndarray:
