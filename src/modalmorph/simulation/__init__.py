@@ -3,7 +3,8 @@
 Laid out as scipy's ``integrate/_ivp``:
 
 - :mod:`.system`: :class:`~.system.ModalSystem`, built once from (source, target, pairs,
-  options): the model and the modes it superposes (:mod:`.basis`), the reference scales,
+  options): the model and the basis of its coordinates (:mod:`.basis`: the modes
+  superposed, or with every mode the element's whitened basis), the reference scales,
   the modal stiffness with the similarity motions free, the springs, the damping, the
   Newmark integrator and the load targets (method.md §4, §7);
 - :mod:`.stop`: one stop test per kind of object (contour, surface or 3D point set,

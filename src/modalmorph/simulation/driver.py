@@ -218,8 +218,9 @@ class Simulation:
 
     @property
     def modes(self) -> Modes:
-        """The modes superposed: all of the model's, or its lowest ``n_modes`` and the
-        Rayleigh-Ritz modes of smooth motions outside their span (method.md §7)."""
+        """The modes superposed: all of the model's (then solved on first use: the
+        integration runs in the element's basis, method.md §4), or its lowest ``n_modes``
+        and the Rayleigh-Ritz modes of smooth motions outside their span (§7)."""
         return self.system.modes
 
     @property

@@ -1,10 +1,12 @@
 """The modal system of one morph, built once: ``x'' + C_mod x' + K_mod x = Phi^T R``.
 
 :class:`ModalSystem` holds what the time integration reads and never changes: the
-physical model and the modes it superposes, the reference scales, the modal stiffness
-(with the similarity motions free), the springs, the damping, the Newmark integrator and
-the load targets (method.md §4). Everything runs in the model's normalised frame (the
-centroid and RMS radius of the shape it is built on).
+physical model and the basis of its coordinates (the modes superposed, or with every
+mode the element's whitened basis, the same equations without the eigenproblem), the
+reference scales, the stiffness in that basis (with the similarity motions free), the
+springs, the damping, the Newmark integrator and the load targets (method.md §4).
+Everything runs in the model's normalised frame (the centroid and RMS radius of the
+shape it is built on).
 """
 
 from __future__ import annotations
