@@ -332,11 +332,13 @@ def similarity_free(frequencies: np.ndarray, B: np.ndarray) -> np.ndarray:
 def similarity_free_full(K: np.ndarray, B: np.ndarray) -> np.ndarray:
     """:func:`similarity_free` for a full stiffness ``K`` (n, n) (not diagonal):
     ``K - K B (B^T K B)^+ B^T K``, the same rank rule on the singular values of the
-    similarity fields' image (the square roots of the eigenvalues of ``B^T K B``)."""
+    similarity fields' image (the square roots of the eigenvalues of ``B^T K B``), at
+    least ``sqrt(s eps)`` of the largest: below that the square's eigenvalues are its
+    rounding."""
     KB = K @ B
     lam, V = np.linalg.eigh(B.T @ KB)
     root = np.sqrt(np.clip(lam, 0.0, None))
-    keep = root > RANK_TOL * root.max()
+    keep = root > max(RANK_TOL, np.sqrt(len(lam) * np.finfo(float).eps)) * root.max()
     Z = KB @ (V[:, keep] / root[keep])
     return K - Z @ Z.T  # exactly symmetric: K is, and Z Z^T is one syrk
 
