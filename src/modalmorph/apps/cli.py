@@ -201,14 +201,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _demo_parser(p) -> None:
-    p.add_argument("--out", type=Path, default=Path("modalmorph-demo"),
+    p.add_argument("-o", "--out", type=Path, default=Path("modalmorph-demo"),
                    help="output folder (default: ./modalmorph-demo)")
 
 
 def _match_parser(p) -> None:
     p.add_argument("source", type=Path, help="source " + _INPUTS_HELP)
     p.add_argument("target", type=Path, help="target shape file (same formats)")
-    p.add_argument("--out", type=Path, default=None,
+    p.add_argument("-o", "--out", type=Path, default=None,
                    help="CSV file for the pairs (source,target,cost); default: stdout")
     p.add_argument("--plot", type=Path, default=None,
                    help="also draw the matches into this image (PNG, SVG, PDF)")
@@ -218,7 +218,7 @@ def _match_parser(p) -> None:
 def _morph_parser(p) -> None:
     p.add_argument("source", type=Path, help="source " + _INPUTS_HELP)
     p.add_argument("target", type=Path, help="target shape file (same formats)")
-    p.add_argument("--out", type=Path, required=True,
+    p.add_argument("-o", "--out", type=Path, required=True,
                    help="output folder (replaced as a whole)")
     _add_config(p)
     add_option_flags(p, PAIR_CLASSES)
@@ -230,7 +230,7 @@ def _track_parser(p) -> None:
                         "or CSVs (natural order), a multi-page TIFF, an (F, H, W) NPY stack "
                         "of masks, an NPZ with an (F, n, d) array, or a CSV with a frame "
                         "column")
-    p.add_argument("--out", type=Path, required=True,
+    p.add_argument("-o", "--out", type=Path, required=True,
                    help="output folder (replaced as a whole)")
     _add_config(p)
     add_option_flags(p, SEQUENCE_CLASSES)
@@ -243,7 +243,7 @@ def _batch_parser(p) -> None:
                         "underscores; cells are TOML values) or TOML ([[item]] tables with "
                         "the same keys); paths relative to it. Or a pressure file of many "
                         "trials (NPY/NPZ), or jiku (jiku-data's 600 trials): see --kind")
-    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("-o", "--out", type=Path, required=True, help="output folder")
     p.add_argument("--workers", type=int, default=None,
                    help="worker processes on this machine (default: one per core)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
