@@ -231,28 +231,55 @@ def test_monotone_search_is_optimal():
 
 
 
-def test_search_within_candidate_spans_is_the_whole_search(monkeypatch):
-    """The search restricted to each row's columns costing at most ``skip`` (the default
-    from 256 columns) finds the very pairs and total of the whole-row search, bit for bit:
-    random costs with ties, doubled (cyclic) targets, repeats, and banded costs like a
-    placed contour's."""
-    from modalmorph.matching import search
+def _reference_search(C, skip, repeat):
+    """The order-preserving programme written plainly, whole rows (as numpy did it before
+    numba): F[i + 1, 1 + j] = min(F[i, 1 + j] + skip, min over k <= j of T[i, k]), the
+    backtrack from the last column taking the last column of the least T."""
+    m, n = C.shape
+    F = np.zeros((m + 1, n + 1))
+    T = np.zeros((m, n))
+    for i in range(m):
+        F[i + 1, 0] = skip * (i + 1)
+        prev = F[i, :-1] if i == 0 or not np.isfinite(repeat) else np.minimum(
+            F[i, 1:] + repeat, F[i, :-1])
+        T[i] = C[i] + prev
+        F[i + 1, 1:] = np.minimum(np.minimum.accumulate(T[i]), F[i, 1:] + skip)
+    j, cur = np.full(m, -1), n - 1
+    for i in range(m - 1, -1, -1):
+        if cur < 0:
+            break
+        a = cur - int(np.argmin(T[i, cur::-1]))
+        if T[i, a] < F[i, cur + 1] + skip:
+            j[i] = a
+            again = np.isfinite(repeat) and i > 0 and F[i, a + 1] + repeat < F[i, a]
+            cur = a if again else a - 1
+    return j, F[m, n]
+
+
+def test_compiled_search_is_the_plain_recurrence():
+    """The compiled search (each row within its columns costing at most ``skip``) finds the
+    very pairs and total of the plain whole-row recurrence, bit for bit: random costs with
+    ties, doubled (cyclic) targets, more rows than columns, rows with no candidate, repeats
+    and one-to-one, banded costs like a placed contour's; the batched totals too."""
     rng = np.random.default_rng(5)
-    problems = []
-    for t in range(300):
-        m, n = rng.integers(1, 30), rng.integers(1, 40)
+    for t in range(400):
+        m, n = rng.integers(0, 30), rng.integers(0, 40)
         C = (np.round(rng.random((m, n)) * 24) if t % 3 == 0 else rng.random((m, n)) * 40
-             if t % 3 == 1 else (np.arange(m)[:, None] * n / m - np.arange(n)) ** 2 / 4
-             + rng.random((m, n)) * 3)
-        problems.append((np.concatenate([C, C], axis=1) if t % 2 else C,
-                         (16.0, 4.0, 0.5)[t % 3], (np.inf, 4.0)[t // 3 % 2]))
-    whole = [_monotone(C, skip, repeat) for C, skip, repeat in problems]
-    monkeypatch.setattr(search, "_SPAN_MIN", 1)  # every problem within its spans
-    monkeypatch.setattr(search, "_SPAN_SHARE", 2.0)
-    for (C, skip, repeat), (j, total) in zip(problems, whole, strict=True):
-        j_span, total_span = _monotone(C, skip, repeat)
-        assert_array_equal(j_span, j)
-        assert total_span == total
+             if t % 3 == 1 else (np.arange(m)[:, None] * n / max(m, 1) - np.arange(n)) ** 2
+             / 4 + rng.random((m, n)) * 3)
+        if t % 5 == 0 and m:
+            C[rng.integers(0, m)] = 50.0  # a row with no candidate
+        C = np.concatenate([C, C], axis=1) if t % 2 else C
+        skip, repeat = (16.0, 4.0, 0.5)[t % 3], (np.inf, 4.0)[t // 3 % 2]
+        j_ref, total_ref = _reference_search(C, skip, repeat)
+        j, total = _monotone(C, skip, repeat)
+        assert_array_equal(j, j_ref)
+        assert total == total_ref
+        if m and n:
+            batch = np.stack([C, C[::-1], 2 * C])
+            expected = [_reference_search(c, skip, repeat)[1] for c in batch]
+            assert_array_equal(monotone_totals(batch, skip, repeat), expected)
+
 
 def test_point_set_pose_among_four():
     """An asymmetric blob and a bent, twisted, rotated, shuffled copy (the scale

@@ -27,10 +27,6 @@ __all__ = ["SKIP", "REPEAT", "mutual_best", "plausible", "monotone_totals", "cyc
 SKIP = 16.0  # leaving a source node unmatched (not measured)
 REPEAT = 4.0  # one target for two consecutive source nodes, a denser source (not measured)
 _TRUST = 4.0  # pairs costing at most this are trusted for the fits (not measured)
-# The search runs within each row's candidate columns when they span at most this share of
-# the cost matrix (heart pairs: 0.6 at 70 nodes, 0.4-0.5 at 250, 0.1-0.4 at 1000, where it
-# takes the match from 265 to 190 ms; with wider spans the extra slicing costs more).
-_SPAN_SHARE, _SPAN_MIN = 0.5, 256  # not below this many columns (70 nodes: 140, spans 0.6)
 
 
 def mutual_best(Z: np.ndarray) -> np.ndarray:
@@ -49,96 +45,6 @@ def plausible(cost: np.ndarray, factor: float) -> np.ndarray:
     return cost <= factor * max(float(np.median(cost)), 1e-12)
 
 
-def _forward(C: np.ndarray, skip: float, repeat: float, keep: bool):
-    """The dynamic programme of :func:`_monotone` over the rows of ``C`` (..., m, n).
-
-    Returns ``(F, T)``: ``F[i, ..., 1 + j]`` is the best cost of rows < i whose last
-    target is <= j (``F[i, ..., 0]``: every one of them skipped) and ``T[i, ..., j]`` the
-    best cost of rows <= i with row i matched to j. Within a row the best predecessor is a
-    running minimum (``np.fmin.accumulate``, for finite costs the same as ``minimum`` and
-    faster on 500-2000 columns): four vectorised O(n) operations per row
-    (six with ``repeat``), on views sliced once. With ``keep=False`` only two rows of
-    ``F`` are kept (the last is ``F[m % 2]``) and ``T`` is None.
-    """
-    *batch, m, n = C.shape
-    F = np.empty((m + 1 if keep else 2, *batch, n + 1))
-    T = np.empty((m if keep else 1, *batch, n))
-    F[0] = 0.0
-    if keep:  # every row skipped: skip * (i + 1)
-        F[1:, ..., 0] = (skip * np.arange(1, m + 1)).reshape(m, *[1] * len(batch))
-    repeats = np.isfinite(repeat)
-    prev = np.empty((*batch, n))
-    # per-row views made once (lists index faster than arrays make views)
-    rows = list(np.moveaxis(C, -2, 0))
-    heads, tails = list(F[..., :-1]), list(F[..., 1:])  # F[i, ..., j] and F[i, ..., 1 + j]
-    Ts, firsts = (list(T), None) if keep else ([T[0]] * m, list(F[..., :1]))
-    add, minimum, running_min = np.add, np.minimum, np.fmin.accumulate
-    for i in range(m):
-        a, b = (i, i + 1) if keep else (i % 2, 1 - i % 2)
-        Ti, Fn, Fa = Ts[i], tails[b], tails[a]
-        if repeats and i > 0:  # previous target < j, or == j at a price
-            add(Fa, repeat, out=prev)
-            minimum(prev, heads[a], out=prev)
-            add(rows[i], prev, out=Ti)
-        else:  # previous target < j
-            add(rows[i], heads[a], out=Ti)
-        running_min(Ti, axis=-1, out=Fn)
-        add(Fa, skip, out=prev)  # or row i skipped
-        minimum(Fn, prev, out=Fn)
-        if not keep:
-            firsts[b][...] = skip * (i + 1)
-    return F, (T if keep else None)
-
-
-def _candidate_span(C: np.ndarray, skip: float) -> tuple[np.ndarray, np.ndarray]:
-    """For every row of ``C`` (m, n) the first and last column whose cost is at most
-    ``skip`` (first > last where there is none). A pair costing more than ``skip`` is in
-    no optimal order-preserving matching (skipping its row instead is cheaper), and never
-    decides a running minimum of :func:`_rows_forward` either (with ``F`` non-increasing
-    along a row, it costs more than skipping the row does), so the search looks only
-    between these columns."""
-    mask = np.less_equal(C, skip)
-    n = C.shape[1]
-    first = np.where(mask.any(axis=1), mask.argmax(axis=1), n)
-    last = n - 1 - mask[:, ::-1].argmax(axis=1)
-    return first, last
-
-
-def _rows_forward(C: np.ndarray, skip: float, repeat: float, first, last):
-    """:func:`_forward` with ``keep`` for one problem (m, n), each row's work restricted to
-    its columns ``first[i]..last[i]`` (:func:`_candidate_span`); ``F`` is bitwise that of
-    :func:`_forward`, ``T`` only within those columns (elsewhere undefined). Before the
-    span a row's ``F`` is the row skipped, after it the smaller of that and the span's
-    minimum: a running minimum over the span alone (the slow part: 7 ns an element)."""
-    m, n = C.shape
-    F = np.empty((m + 1, n + 1))
-    T = np.empty((m, n))
-    F[0] = 0.0
-    F[1:, 0] = skip * np.arange(1, m + 1)
-    repeats = np.isfinite(repeat)
-    prev = np.empty(n)
-    add, minimum, running_min = np.add, np.minimum, np.fmin.accumulate
-    heads, tails = list(F[:, :-1]), list(F[:, 1:])  # F[i, j] and F[i, 1 + j]
-    for i, lo, hi in zip(range(m), first, last, strict=True):
-        hi += 1
-        Fa, Fn = tails[i], tails[i + 1]
-        add(Fa, skip, out=Fn)  # row i skipped
-        if lo >= hi:
-            continue
-        Ti, p = T[i, lo:hi], prev[lo:hi]
-        if repeats and i > 0:  # previous target < j, or == j at a price
-            add(Fa[lo:hi], repeat, out=p)
-            minimum(p, heads[i][lo:hi], out=p)
-            add(C[i, lo:hi], p, out=Ti)
-        else:  # previous target < j
-            add(C[i, lo:hi], heads[i][lo:hi], out=Ti)
-        running_min(Ti, out=p)
-        span, rest = Fn[lo:hi], Fn[hi:]
-        minimum(span, p, out=span)
-        minimum(rest, p[-1], out=rest)
-    return F, T
-
-
 def _monotone(C: np.ndarray, skip: float, repeat: float = np.inf
               ) -> tuple[np.ndarray, float]:
     """Order-preserving matching: ``j(i)`` non-decreasing in ``i``, each source node matched
@@ -146,44 +52,21 @@ def _monotone(C: np.ndarray, skip: float, repeat: float = np.inf
     nodes at the extra cost ``repeat`` (``inf``: one-to-one); minimal total cost.
 
     ``C`` has shape (m, n). Returns ``j`` (m,), -1 where the source node is unmatched, and
-    the total cost. The backtrack recomputes each decision on the one column it visits,
-    within the row's candidate columns (:func:`_candidate_span`).
+    the total cost. A dynamic programme compiled with numba (:mod:`._dp`), each row's work
+    within its columns costing at most ``skip``.
     """
-    m, n = C.shape
-    first, last, spans = [0] * m, [n - 1] * m, False
-    if n >= _SPAN_MIN:
-        lo, hi = _candidate_span(C, skip)
-        spans = np.maximum(hi + 1 - lo, 0).sum() <= _SPAN_SHARE * m * n
-        if spans:
-            first, last = lo.tolist(), hi.tolist()
-    if spans:
-        F, T = _rows_forward(C, skip, repeat, first, last)
-    else:  # short or wide spans: whole rows, fewer operations a row
-        F, T = _forward(C, skip, repeat, keep=True)
-    j = np.full(m, -1, np.intp)
-    repeats = np.isfinite(repeat)
-    cur = n - 1
-    for i in range(m - 1, -1, -1):
-        if cur < 0:
-            break
-        lo, hi = first[i], last[i] if last[i] < cur else cur
-        if lo > hi:  # no candidate left of cur: row i skipped
-            continue
-        Ti, Fi = T[i], F[i]
-        left = Ti[hi::-1] if lo == 0 else Ti[hi:lo - 1:-1]
-        a = hi - int(left.argmin())  # last position of the minimum so far
-        if Ti[a] < Fi[cur + 1] + skip:  # row i matched (else skipped)
-            j[i] = a
-            again = repeats and i > 0 and Fi[a + 1] + repeat < Fi[a]
-            cur = a if again else a - 1
-    return j, float(F[m, -1])
+    from ._dp import ordered  # numba loads with the first search, not with the package
+    j, best = ordered(np.ascontiguousarray(C, dtype=np.float64), float(skip), float(repeat))
+    return j, float(best)
 
 
 def monotone_totals(C: np.ndarray, skip: float, repeat: float = np.inf) -> np.ndarray:
     """The least total cost of :func:`_monotone` for a batch of problems ``C`` (..., m, n),
     shape (...,), in memory of two rows."""
-    F, _ = _forward(C, skip, repeat, keep=False)
-    return F[C.shape[-2] % 2, ..., -1]
+    from ._dp import totals
+    *batch, m, n = C.shape
+    flat = np.ascontiguousarray(C, dtype=np.float64).reshape(-1, m, n)
+    return totals(flat, float(skip), float(repeat)).reshape(batch)
 
 
 def cyclic(C: np.ndarray, closed: bool) -> np.ndarray:
