@@ -269,16 +269,32 @@ def test_compiled_search_is_the_plain_recurrence():
              / 4 + rng.random((m, n)) * 3)
         if t % 5 == 0 and m:
             C[rng.integers(0, m)] = 50.0  # a row with no candidate
-        C = np.concatenate([C, C], axis=1) if t % 2 else C
+        closed = bool(t % 2)  # the search on the target doubled
         skip, repeat = (16.0, 4.0, 0.5)[t % 3], (np.inf, 4.0)[t // 3 % 2]
-        j_ref, total_ref = _reference_search(C, skip, repeat)
-        j, total = _monotone(C, skip, repeat)
+        j_ref, total_ref = _reference_search(np.tile(C, 1 + closed), skip, repeat)
+        j, total = _monotone(C, skip, repeat, closed)
         assert_array_equal(j, j_ref)
         assert total == total_ref
         if m and n:
             batch = np.stack([C, C[::-1], 2 * C])
-            expected = [_reference_search(c, skip, repeat)[1] for c in batch]
-            assert_array_equal(monotone_totals(batch, skip, repeat), expected)
+            expected = [_reference_search(np.tile(c, 1 + closed), skip, repeat)[1]
+                        for c in batch]
+            assert_array_equal(monotone_totals(batch, skip, repeat, closed), expected)
+
+
+def test_placed_costs_are_numpys_bit_for_bit():
+    """The compiled cost of a placed source is ``sq_dist(x, y) / h2 + F[rows]`` exactly
+    (the same operations in the same order), nodes on top of each other included."""
+    from modalmorph.matching.features import sq_dist
+    from modalmorph.matching.search import Costs, _placed_costs
+    rng = np.random.default_rng(8)
+    for m, n in ((1, 1), (7, 30), (40, 13)):
+        x, y = rng.standard_normal((m, 2)), rng.standard_normal((n, 2))
+        y[0] = x[-1]  # a zero distance
+        F = rng.random((m + 3, n))
+        rows = np.sort(rng.choice(m + 3, m, replace=False))
+        costs = Costs(x, y, F, 0.37, True, True)
+        assert_array_equal(_placed_costs(costs, x, rows), sq_dist(x, y) / 0.37 + F[rows])
 
 
 def test_point_set_pose_among_four():

@@ -20,55 +20,72 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["ordered", "totals"]
+__all__ = ["ordered", "totals", "placed_costs"]
 
 
 @numba.njit(cache=True, nogil=True)
-def _forward(C, skip, repeat, F, first, last):  # pragma: no cover - compiled
+def _span(row, skip):  # pragma: no cover - compiled
+    """The first and last column of ``row`` costing at most ``skip`` (first > last where
+    there is none)."""
+    n = len(row)
+    lo, hi = 0, n - 1
+    while lo < n and not row[lo] <= skip:
+        lo += 1
+    while hi >= lo and not row[hi] <= skip:
+        hi -= 1
+    return lo, hi
+
+
+@numba.njit(cache=True, nogil=True)
+def _forward(C, skip, repeat, doubled, F, first, last):  # pragma: no cover - compiled
     """Fill ``F`` (m + 1 rows kept, or 2 alternating) and each row's candidate columns
-    ``first[i]..last[i]`` (first > last where there is none)."""
+    ``first[i]..last[i]`` (first > last where there is none). ``doubled``: the columns
+    of ``C`` (m, n) twice over, the search's target a closed one doubled (2n columns)."""
     m, n = C.shape
+    N = 2 * n if doubled else n
     keep = F.shape[0] == m + 1
     repeats = repeat < np.inf
     F[0, :] = 0.0
     for i in range(m):
         a, b = (i, i + 1) if keep else (i % 2, 1 - i % 2)
         Fa, Fn, row = F[a], F[b], C[i]
-        lo, hi = 0, n - 1
-        while lo < n and not row[lo] <= skip:
-            lo += 1
-        while hi >= lo and not row[hi] <= skip:
-            hi -= 1
+        lo, hi = _span(row, skip)
+        if doubled and lo <= hi:
+            hi += n
         first[i], last[i] = lo, hi
         Fn[0] = skip * (i + 1)
         for j in range(lo):  # before the candidates: row i skipped
             Fn[1 + j] = Fa[1 + j] + skip
         run = np.inf
         for j in range(lo, hi + 1):
-            p = Fa[j]
-            if repeats and i > 0:  # previous target < j, or == j at a price
-                q = Fa[1 + j] + repeat
-                p = q if q <= p else p
-            t = row[j] + p
-            run = t if j == lo or t < run else run
+            s = Fa[1 + j] + skip
+            c = row[j - n] if j >= n else row[j]
+            if c <= skip:  # a dearer pair never decides the minimum, as outside the span
+                p = Fa[j]
+                if repeats and i > 0:  # previous target < j, or == j at a price
+                    q = Fa[1 + j] + repeat
+                    p = q if q <= p else p
+                t = c + p
+                run = t if t < run else run
+            Fn[1 + j] = s if s <= run else run
+        for j in range(hi + 1, N):  # after them: skipped, or matched within them
             s = Fa[1 + j] + skip
             Fn[1 + j] = s if s <= run else run
-        for j in range(hi + 1, n):  # after them: skipped, or matched within them
-            s = Fa[1 + j] + skip
-            Fn[1 + j] = s if lo > hi or s <= run else run
 
 
 @numba.njit(cache=True, nogil=True)
-def ordered(C, skip, repeat):  # pragma: no cover - compiled
-    """Order-preserving matching over ``C`` (m, n), C-contiguous float64. Returns ``j``
-    (m,), -1 where the source node is unmatched, and the least total cost."""
+def ordered(C, skip, repeat, doubled):  # pragma: no cover - compiled
+    """Order-preserving matching over ``C`` (m, n), C-contiguous float64, its columns
+    twice over where ``doubled``. Returns ``j`` (m,), -1 where the source node is
+    unmatched, and the least total cost."""
     m, n = C.shape
-    F = np.empty((m + 1, n + 1))
+    N = 2 * n if doubled else n
+    F = np.empty((m + 1, N + 1))
     first, last = np.empty(m, np.intp), np.empty(m, np.intp)
-    _forward(C, skip, repeat, F, first, last)
+    _forward(C, skip, repeat, doubled, F, first, last)
     repeats = repeat < np.inf
     j = np.full(m, -1, np.intp)
-    cur = n - 1
+    cur = N - 1
     for i in range(m - 1, -1, -1):
         if cur < 0:
             break
@@ -76,29 +93,47 @@ def ordered(C, skip, repeat):  # pragma: no cover - compiled
         Fi, row = F[i], C[i]
         a, best = -1, np.inf
         for k in range(hi, lo - 1, -1):  # the last column of the least T[i, lo..hi]
-            p = Fi[k]
-            if repeats and i > 0:
-                q = Fi[1 + k] + repeat
-                p = q if q <= p else p
-            t = row[k] + p
-            if a < 0 or t < best:
-                a, best = k, t
+            c = row[k - n] if k >= n else row[k]
+            if c <= skip:
+                p = Fi[k]
+                if repeats and i > 0:
+                    q = Fi[1 + k] + repeat
+                    p = q if q <= p else p
+                t = c + p
+                if t < best:
+                    a, best = k, t
         if a >= 0 and best < Fi[cur + 1] + skip:  # row i matched (else skipped)
             j[i] = a
             again = repeats and i > 0 and Fi[a + 1] + repeat < Fi[a]
             cur = a if again else a - 1
-    return j, F[m, n]
+    return j, F[m, N]
 
 
 @numba.njit(cache=True, nogil=True)
-def totals(C, skip, repeat):  # pragma: no cover - compiled
+def totals(C, skip, repeat, doubled):  # pragma: no cover - compiled
     """The least total cost of :func:`ordered` for each problem of ``C`` (b, m, n), in
     memory of two rows of ``F``."""
     b, m, n = C.shape
-    F = np.empty((2, n + 1))
+    F = np.empty((2, (2 * n if doubled else n) + 1))
     first, last = np.empty(m, np.intp), np.empty(m, np.intp)
     out = np.empty(b)
     for k in range(b):
-        _forward(C[k], skip, repeat, F, first, last)
-        out[k] = F[m % 2, n]
+        _forward(C[k], skip, repeat, doubled, F, first, last)
+        out[k] = F[m % 2, F.shape[1] - 1]
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def placed_costs(xx, yy, G2, S, rows, h2):  # pragma: no cover - compiled
+    """``max(xx[i] + yy[j] - G2[i, j], 0) / h2 + S[rows[i], j]`` (m, n), with ``G2 = 2 x
+    y^T``: the operations of numpy's ``sq_dist(x, y) / h2 + S[rows]`` in its order, so bit
+    for bit, in one pass."""
+    m, n = G2.shape
+    C = np.empty((m, n))
+    for i in range(m):
+        s = S[rows[i]]
+        for j in range(n):
+            c = (xx[i] + yy[j]) - G2[i, j]
+            c = c if c >= 0.0 or c != c else 0.0
+            C[i, j] = c / h2 + s[j]
+    return C

@@ -25,7 +25,6 @@ from .search import (
     REPEAT,
     SKIP,
     Costs,
-    cyclic,
     monotone_totals,
     ordered_pairs,
     trusted_pairs,
@@ -156,7 +155,7 @@ def _pose_search(C: np.ndarray, candidates: np.ndarray, closed: bool, skip: floa
             break
         r = ranked[start:start + _POSE_BATCH]
         Cb = np.concatenate([C[r], C[r][:, :, ::-1]])  # forward, reversed target order
-        total = monotone_totals(cyclic(Cb, closed), skip, repeat)
+        total = monotone_totals(Cb, skip, repeat, closed)
         k = int(np.argmin(total))
         if total[k] < best_total:
             best_total, best = float(total[k]), (Cb[k], k >= len(r), r[k % len(r)])

@@ -19,7 +19,7 @@ from scipy.optimize import linear_sum_assignment
 
 from .features import sq_dist
 
-__all__ = ["SKIP", "REPEAT", "mutual_best", "plausible", "monotone_totals", "cyclic",
+__all__ = ["SKIP", "REPEAT", "mutual_best", "plausible", "monotone_totals",
            "ordered_pairs", "Costs", "pairs_at", "trusted_pairs", "total", "objective",
            "final_pairs"]
 
@@ -45,39 +45,38 @@ def plausible(cost: np.ndarray, factor: float) -> np.ndarray:
     return cost <= factor * max(float(np.median(cost)), 1e-12)
 
 
-def _monotone(C: np.ndarray, skip: float, repeat: float = np.inf
+def _monotone(C: np.ndarray, skip: float, repeat: float = np.inf, closed: bool = False
               ) -> tuple[np.ndarray, float]:
     """Order-preserving matching: ``j(i)`` non-decreasing in ``i``, each source node matched
     (cost ``C[i, j]``) or skipped (cost ``skip``), a target reused by consecutive source
     nodes at the extra cost ``repeat`` (``inf``: one-to-one); minimal total cost.
 
-    ``C`` has shape (m, n). Returns ``j`` (m,), -1 where the source node is unmatched, and
-    the total cost. A dynamic programme compiled with numba (:mod:`._dp`), each row's work
-    within its columns costing at most ``skip``.
+    ``C`` has shape (m, n); ``closed``: the target is closed and the search runs on it
+    doubled (2n columns, ``C``'s twice over), so that it may start anywhere. Returns
+    ``j`` (m,), -1 where the source node is unmatched, and the total cost. A dynamic
+    programme compiled with numba (:mod:`._dp`), each row's work within its columns
+    costing at most ``skip``.
     """
     from ._dp import ordered  # numba loads with the first search, not with the package
-    j, best = ordered(np.ascontiguousarray(C, dtype=np.float64), float(skip), float(repeat))
+    j, best = ordered(np.ascontiguousarray(C, dtype=np.float64), float(skip), float(repeat),
+                      closed)
     return j, float(best)
 
 
-def monotone_totals(C: np.ndarray, skip: float, repeat: float = np.inf) -> np.ndarray:
+def monotone_totals(C: np.ndarray, skip: float, repeat: float = np.inf,
+                    closed: bool = False) -> np.ndarray:
     """The least total cost of :func:`_monotone` for a batch of problems ``C`` (..., m, n),
     shape (...,), in memory of two rows."""
     from ._dp import totals
     *batch, m, n = C.shape
     flat = np.ascontiguousarray(C, dtype=np.float64).reshape(-1, m, n)
-    return totals(flat, float(skip), float(repeat)).reshape(batch)
-
-
-def cyclic(C: np.ndarray, closed: bool) -> np.ndarray:
-    """A closed target doubled, so that an order-preserving search may start anywhere."""
-    return np.concatenate([C, C], axis=-1) if closed else C
+    return totals(flat, float(skip), float(repeat), closed).reshape(batch)
 
 
 def ordered_pairs(C: np.ndarray, closed: bool, skip: float, repeat: float):
     """Order-preserving pairs over a cost (m, n), cyclic for a closed target. Returns j
     (m,) and the total cost."""
-    j, best = _monotone(cyclic(C, closed), skip, repeat)
+    j, best = _monotone(C, skip, repeat, closed)
     return np.where(j >= 0, j % C.shape[-1], -1), best
 
 
@@ -139,22 +138,14 @@ class Costs:
     many: bool = False
 
 
-def _placed_costs(costs: Costs, x: np.ndarray, rows: np.ndarray):
-    """``sq_dist(x, y) / h2 + F[rows]`` (m, n), bitwise, written in place into the first
-    half of an (m, 2n) array whose second half repeats it for a closed target
-    (:func:`cyclic`): fewer passes over m x n arrays. Returns the cost and the array
-    searched (the same for an open target)."""
-    y, n = costs.y, len(costs.y)
-    out = np.empty((len(x), 2 * n if costs.closed else n))
-    C = out[:, :n]
-    np.add(np.sum(x**2, axis=1)[:, None], np.sum(y**2, axis=1)[None, :], out=C)
-    C -= 2 * x @ y.T  # as features.sq_dist
-    np.maximum(C, 0.0, out=C)
-    C /= costs.h2
-    C += costs.F if len(rows) == len(costs.F) else costs.F[rows]  # every node, in order
-    if costs.closed:
-        out[:, n:] = C
-    return C, out
+def _placed_costs(costs: Costs, x: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``sq_dist(x, y) / h2 + F[rows]`` (m, n), bitwise, in one compiled pass
+    (:func:`._dp.placed_costs`) after the product ``2 x y^T``."""
+    from ._dp import placed_costs
+    y = costs.y
+    xx, yy = np.sum(x**2, axis=1), np.sum(y**2, axis=1)  # as features.sq_dist
+    return placed_costs(xx, yy, 2 * x @ y.T, costs.F, np.asarray(rows, np.intp),
+                        float(costs.h2))
 
 
 def pairs_at(costs: Costs, z: np.ndarray, rows: np.ndarray):
@@ -162,9 +153,8 @@ def pairs_at(costs: Costs, z: np.ndarray, rows: np.ndarray):
     placed at ``z``, and the cost matrix: order-preserving for contours, an assignment for
     point sets."""
     if costs.ordered:
-        C, doubled = _placed_costs(costs, z[rows], rows)
-        j, _ = _monotone(doubled, SKIP, costs.repeat)
-        j = np.where(j >= 0, j % C.shape[1], -1)
+        C = _placed_costs(costs, z[rows], rows)
+        j, _ = ordered_pairs(C, costs.closed, SKIP, costs.repeat)
         return _pairs_from_j(j, C, one_to_one=not costs.many), C
     C = sq_dist(z[rows], costs.y) / costs.h2 + costs.F[rows]
     r, c = linear_sum_assignment(C)
