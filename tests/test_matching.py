@@ -282,19 +282,32 @@ def test_compiled_search_is_the_plain_recurrence():
             assert_array_equal(monotone_totals(batch, skip, repeat, closed), expected)
 
 
-def test_placed_costs_are_numpys_bit_for_bit():
-    """The compiled cost of a placed source is ``sq_dist(x, y) / h2 + F[rows]`` exactly
-    (the same operations in the same order), nodes on top of each other included."""
+def test_placed_search_is_numpys_costs_searched():
+    """The search that makes each row of the placed source's cost itself finds the pairs
+    of the search over numpy's cost ``sq_dist(x, y) / h2 + F[rows]`` and their costs, bit
+    for bit (nodes on top of each other, closed and open targets, repeats)."""
     from modalmorph.matching.features import sq_dist
-    from modalmorph.matching.search import Costs, _placed_costs
+    from modalmorph.matching.search import Costs, _pairs_from_j, ordered_pairs, pairs_at
     rng = np.random.default_rng(8)
-    for m, n in ((1, 1), (7, 30), (40, 13)):
-        x, y = rng.standard_normal((m, 2)), rng.standard_normal((n, 2))
-        y[0] = x[-1]  # a zero distance
+    for m, n, closed, repeat in ((1, 1, True, np.inf), (7, 30, False, np.inf),
+                                 (40, 13, True, 4.0), (60, 50, True, np.inf)):
+        t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+        y = np.c_[np.cos(t), np.sin(t)]
+        z = np.c_[np.cos(t[0] + np.arange(m + 3) * 2 * np.pi / m), np.zeros(m + 3)]
+        z[:, 1] = rng.normal(0, 0.05, m + 3)
+        z[0] = y[0]  # a zero distance
         F = rng.random((m + 3, n))
         rows = np.sort(rng.choice(m + 3, m, replace=False))
-        costs = Costs(x, y, F, 0.37, True, True)
-        assert_array_equal(_placed_costs(costs, x, rows), sq_dist(x, y) / 0.37 + F[rows])
+        h2 = (2 * np.pi / n) ** 2
+        costs = Costs(z, y, F, h2, True, closed, repeat, many=np.isfinite(repeat))
+        C = sq_dist(z[rows], y) / h2 + F[rows]
+        j, _ = ordered_pairs(C, closed, 16.0, repeat)
+        cost = np.where(j >= 0, C[np.arange(m), np.maximum(j, 0)], np.inf)
+        expected = _pairs_from_j(j, cost, one_to_one=not np.isfinite(repeat))
+        pairs, pair_cost = pairs_at(costs, z, rows)
+        assert len(pairs) > 0
+        assert_array_equal(pairs, expected[0])
+        assert_array_equal(pair_cost, expected[1])
 
 
 def test_point_set_pose_among_four():

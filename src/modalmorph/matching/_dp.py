@@ -8,11 +8,16 @@ extra cost ``repeat`` of a target reused by consecutive source nodes (``inf``: n
     T[i, j] = C[i, j] + min(F[i, 1 + j] + repeat, F[i, j])    (only F[i, j] for i = 0)
     F[i + 1, 1 + j] = min(F[i, 1 + j] + skip, min(T[i, :j + 1]))
 
-``F[i, 1 + j]`` is the least cost of rows < i whose last target is <= j. Row i's work runs
-over its candidate columns only, the first to the last whose cost is at most ``skip``: a
-pair costing more is in no optimal matching (skipping the row is cheaper) and never decides
-a minimum (``F`` does not increase along a row), so ``F`` is bit for bit that of whole rows.
-The backtrack recomputes ``T`` on the columns it scans; ties go to the last column.
+``F[i, 1 + j]`` is the least cost of rows < i whose last target is <= j; the total is
+``F[m, n]``. A closed target is searched doubled (2n columns, ``C``'s twice over) so that
+the pairs may start anywhere. A pair costing more than ``skip`` is in no optimal matching
+(skipping the row is cheaper) and never decides a minimum (``F`` does not increase along a
+row), so the work of a row runs over its pairs costing at most ``skip`` and ``F`` is bit for
+bit that of whole rows. The backtrack takes, of the least ``T[i, :cur + 1]``, the last
+column (ties), and matches row i there if that is cheaper than skipping it; it needs of
+each row only the columns where that least ``T`` so far moves (events: the column, whether
+the previous row may end there too, the first column from which skipping is cheaper), so
+``F`` keeps two rows.
 """
 
 from __future__ import annotations
@@ -20,120 +25,195 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["ordered", "totals", "placed_costs"]
+__all__ = ["ordered", "totals", "placed_search", "placed_cost"]
 
 
 @numba.njit(cache=True, nogil=True)
-def _span(row, skip):  # pragma: no cover - compiled
-    """The first and last column of ``row`` costing at most ``skip`` (first > last where
-    there is none)."""
+def _candidates(row, skip, cand):  # pragma: no cover - compiled
+    """Write the columns of ``row`` costing at most ``skip`` into ``cand``, ascending;
+    returns how many."""
+    nc = 0
+    for k in range(len(row)):
+        if row[k] <= skip:
+            cand[nc] = k
+            nc += 1
+    return nc
+
+
+@numba.njit(cache=True, nogil=True)
+def _row(row, cand, nc, i, skip, repeat, doubled, Fa, Fn, events, e
+         ):  # pragma: no cover - compiled
+    """Row ``i`` of the programme: ``Fn`` (row i + 1 of ``F``) from ``Fa`` (row i), the
+    costs ``row`` (n,) and its columns ``cand[:nc]`` costing at most ``skip``; its events
+    from ``events[:, e]`` on where ``events`` has room. Between two candidates the least
+    ``T`` so far is fixed: ``F`` is that, until skipping the row is cheaper, then skipping
+    (``F[i]`` does not rise along the row: the column where skipping wins is bisected,
+    the rest are two vectorised fills).
+    Returns the next free event."""
     n = len(row)
-    lo, hi = 0, n - 1
-    while lo < n and not row[lo] <= skip:
-        lo += 1
-    while hi >= lo and not row[hi] <= skip:
-        hi -= 1
-    return lo, hi
+    N = 2 * n if doubled else n
+    repeats = repeat < np.inf and i > 0
+    record = events.shape[1] > 0
+    Fn[0] = skip * (i + 1)
+    run, skipping, open_ = np.inf, True, False  # open_: the last event not yet skipped
+    j, last = 0, 2 * nc if doubled else nc
+    for h in range(last + 1):
+        stop = N if h == last else cand[h] if h < nc else cand[h - nc] + n
+        if not skipping:  # matched at the least T so far, until skipping is cheaper
+            a, b = j, stop  # F[i, 1 + j] + skip does not rise: bisect for that column
+            while a < b:
+                mid = (a + b) // 2
+                if Fa[1 + mid] + skip <= run:
+                    b = mid
+                else:
+                    a = mid + 1
+            for k in range(j, a):
+                Fn[1 + k] = run
+            j = a
+            if j < stop:
+                skipping = True
+                if open_:
+                    events[2, e - 1] = j
+                    open_ = False
+        for k in range(j, stop):  # skipped: F[i, 1 + j] + skip only falls
+            Fn[1 + k] = Fa[1 + k] + skip
+        if h == last:
+            break
+        p = Fa[stop]  # the candidate: previous target < stop, or == stop at a price
+        if repeats:
+            q = Fa[1 + stop] + repeat
+            p = q if q <= p else p
+        t = (row[stop - n] if stop >= n else row[stop]) + p
+        if t <= run:  # the last column of the least T so far
+            run, skipping = t, False
+            if record:
+                if open_:
+                    events[2, e - 1] = stop
+                events[0, e] = stop
+                events[1, e] = repeats and Fa[stop + 1] + repeat < Fa[stop]
+                e += 1
+                open_ = True
+        s = Fa[1 + stop] + skip
+        if s <= run:
+            Fn[1 + stop] = s
+            skipping = True
+            if open_:
+                events[2, e - 1] = stop
+                open_ = False
+        else:
+            Fn[1 + stop] = run
+        j = stop + 1
+    if open_:
+        events[2, e - 1] = N
+    return e
 
 
 @numba.njit(cache=True, nogil=True)
-def _forward(C, skip, repeat, doubled, F, first, last):  # pragma: no cover - compiled
-    """Fill ``F`` (m + 1 rows kept, or 2 alternating) and each row's candidate columns
-    ``first[i]..last[i]`` (first > last where there is none). ``doubled``: the columns
-    of ``C`` (m, n) twice over, the search's target a closed one doubled (2n columns)."""
-    m, n = C.shape
-    N = 2 * n if doubled else n
-    keep = F.shape[0] == m + 1
-    repeats = repeat < np.inf
-    F[0, :] = 0.0
-    for i in range(m):
-        a, b = (i, i + 1) if keep else (i % 2, 1 - i % 2)
-        Fa, Fn, row = F[a], F[b], C[i]
-        lo, hi = _span(row, skip)
-        if doubled and lo <= hi:
-            hi += n
-        first[i], last[i] = lo, hi
-        Fn[0] = skip * (i + 1)
-        for j in range(lo):  # before the candidates: row i skipped
-            Fn[1 + j] = Fa[1 + j] + skip
-        run = np.inf
-        for j in range(lo, hi + 1):
-            s = Fa[1 + j] + skip
-            c = row[j - n] if j >= n else row[j]
-            if c <= skip:  # a dearer pair never decides the minimum, as outside the span
-                p = Fa[j]
-                if repeats and i > 0:  # previous target < j, or == j at a price
-                    q = Fa[1 + j] + repeat
-                    p = q if q <= p else p
-                t = c + p
-                run = t if t < run else run
-            Fn[1 + j] = s if s <= run else run
-        for j in range(hi + 1, N):  # after them: skipped, or matched within them
-            s = Fa[1 + j] + skip
-            Fn[1 + j] = s if s <= run else run
+def _room(events, e, n):  # pragma: no cover - compiled
+    """``events`` with room for one more row of ``n`` columns doubled after ``e``."""
+    if e + 2 * n <= events.shape[1]:
+        return events
+    grown = np.empty((3, 2 * (e + 2 * n)), np.intp)
+    grown[:, :e] = events[:, :e]
+    return grown
+
+
+@numba.njit(cache=True, nogil=True)
+def _backtrack(events, starts, N):  # pragma: no cover - compiled
+    """``j`` (m,) from the events of each row (row i's from ``starts[i]``)."""
+    m = len(starts) - 1
+    j = np.full(m, -1, np.intp)
+    cur = N - 1
+    for i in range(m - 1, -1, -1):
+        if cur < 0:
+            break
+        e0, e1 = starts[i], starts[i + 1]
+        e = e0 + np.searchsorted(events[0, e0:e1], cur, side="right") - 1
+        if e >= e0 and cur < events[2, e]:  # row i matched (else skipped)
+            j[i] = a = events[0, e]
+            cur = a if events[1, e] else a - 1
+    return j
 
 
 @numba.njit(cache=True, nogil=True)
 def ordered(C, skip, repeat, doubled):  # pragma: no cover - compiled
     """Order-preserving matching over ``C`` (m, n), C-contiguous float64, its columns
     twice over where ``doubled``. Returns ``j`` (m,), -1 where the source node is
-    unmatched, and the least total cost."""
+    unmatched (columns of the doubled target: 0..2n - 1), and the least total cost."""
     m, n = C.shape
     N = 2 * n if doubled else n
-    F = np.empty((m + 1, N + 1))
-    first, last = np.empty(m, np.intp), np.empty(m, np.intp)
-    _forward(C, skip, repeat, doubled, F, first, last)
-    repeats = repeat < np.inf
-    j = np.full(m, -1, np.intp)
-    cur = N - 1
-    for i in range(m - 1, -1, -1):
-        if cur < 0:
-            break
-        lo, hi = first[i], min(last[i], cur)
-        Fi, row = F[i], C[i]
-        a, best = -1, np.inf
-        for k in range(hi, lo - 1, -1):  # the last column of the least T[i, lo..hi]
-            c = row[k - n] if k >= n else row[k]
-            if c <= skip:
-                p = Fi[k]
-                if repeats and i > 0:
-                    q = Fi[1 + k] + repeat
-                    p = q if q <= p else p
-                t = c + p
-                if t < best:
-                    a, best = k, t
-        if a >= 0 and best < Fi[cur + 1] + skip:  # row i matched (else skipped)
-            j[i] = a
-            again = repeats and i > 0 and Fi[a + 1] + repeat < Fi[a]
-            cur = a if again else a - 1
-    return j, F[m, N]
+    F = np.empty((2, N + 1))
+    F[0, :] = 0.0
+    events = np.empty((3, 4 * m + 2 * n), np.intp)
+    starts = np.zeros(m + 1, np.intp)
+    cand = np.empty(n, np.intp)
+    for i in range(m):
+        nc = _candidates(C[i], skip, cand)
+        events = _room(events, starts[i], n)
+        starts[i + 1] = _row(C[i], cand, nc, i, skip, repeat, doubled, F[i % 2],
+                             F[1 - i % 2], events, starts[i])
+    return _backtrack(events, starts, N), F[m % 2, N]
 
 
 @numba.njit(cache=True, nogil=True)
 def totals(C, skip, repeat, doubled):  # pragma: no cover - compiled
-    """The least total cost of :func:`ordered` for each problem of ``C`` (b, m, n), in
-    memory of two rows of ``F``."""
+    """The least total cost of :func:`ordered` for each problem of ``C`` (b, m, n)."""
     b, m, n = C.shape
     F = np.empty((2, (2 * n if doubled else n) + 1))
-    first, last = np.empty(m, np.intp), np.empty(m, np.intp)
+    none = np.empty((3, 0), np.intp)
+    cand = np.empty(n, np.intp)
     out = np.empty(b)
     for k in range(b):
-        _forward(C[k], skip, repeat, doubled, F, first, last)
+        F[0, :] = 0.0
+        for i in range(m):
+            nc = _candidates(C[k, i], skip, cand)
+            _row(C[k, i], cand, nc, i, skip, repeat, doubled, F[i % 2], F[1 - i % 2], none, 0)
         out[k] = F[m % 2, F.shape[1] - 1]
     return out
 
 
 @numba.njit(cache=True, nogil=True)
-def placed_costs(xx, yy, G2, S, rows, h2):  # pragma: no cover - compiled
-    """``max(xx[i] + yy[j] - G2[i, j], 0) / h2 + S[rows[i], j]`` (m, n), with ``G2 = 2 x
-    y^T``: the operations of numpy's ``sq_dist(x, y) / h2 + S[rows]`` in its order, so bit
-    for bit, in one pass."""
+def placed_cost(xx, yy, G2, S, r, i, j, h2):  # pragma: no cover - compiled
+    """``max(xx[i] + yy[j] - G2[i, j], 0) / h2 + S[r, j]``: numpy's ``sq_dist(x, y) / h2 +
+    S[rows]`` (``G2 = 2 x y^T``) in its order of operations, so bit for bit."""
+    c = (xx[i] + yy[j]) - G2[i, j]
+    c = c if c >= 0.0 or c != c else 0.0
+    return c / h2 + S[r, j]
+
+
+@numba.njit(cache=True, nogil=True)
+def placed_search(xx, yy, G2, S, rows, h2, skip, repeat, doubled
+                  ):  # pragma: no cover - compiled
+    """:func:`ordered` over the cost of source nodes placed at ``x`` against the target
+    ``y``, :func:`placed_cost`, each row made when the search reaches it (no (m, n) cost
+    array), and only where the squared distance alone does not exceed ``skip`` (the
+    signature cost ``S`` is a squared distance, >= 0: no division elsewhere). Returns
+    ``j`` (m,) on the target itself (0..n - 1) and the cost of each pair (m,) (``inf``
+    where unmatched)."""
     m, n = G2.shape
-    C = np.empty((m, n))
+    N = 2 * n if doubled else n
+    F = np.empty((2, N + 1))
+    F[0, :] = 0.0
+    row, cand = np.empty(n), np.empty(n, np.intp)
+    events = np.empty((3, 4 * m + 2 * n), np.intp)
+    starts = np.zeros(m + 1, np.intp)
+    near = skip * h2 * (1.0 + 1e-12)  # S >= 0: a pair farther than this costs > skip
     for i in range(m):
-        s = S[rows[i]]
-        for j in range(n):
-            c = (xx[i] + yy[j]) - G2[i, j]
-            c = c if c >= 0.0 or c != c else 0.0
-            C[i, j] = c / h2 + s[j]
-    return C
+        nc = 0
+        for k in range(n):  # the row's candidates; the others' costs are never read
+            if (xx[i] + yy[k]) - G2[i, k] <= near:
+                row[k] = c = placed_cost(xx, yy, G2, S, rows[i], i, k, h2)
+                if c <= skip:
+                    cand[nc] = k
+                    nc += 1
+        events = _room(events, starts[i], n)
+        starts[i + 1] = _row(row, cand, nc, i, skip, repeat, doubled, F[i % 2],
+                             F[1 - i % 2], events, starts[i])
+    j = _backtrack(events, starts, N)
+    cost = np.full(m, np.inf)
+    for i in range(m):
+        if j[i] >= n:
+            j[i] -= n
+        if j[i] >= 0:
+            cost[i] = placed_cost(xx, yy, G2, S, rows[i], i, j[i], h2)
+    return j, cost

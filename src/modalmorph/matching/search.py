@@ -110,14 +110,16 @@ def _untangle(t: np.ndarray, cost: np.ndarray, n: int, skip: float, strict: bool
         keep[end if loss_end <= loss_start else start] = False
 
 
-def _pairs_from_j(j: np.ndarray, cost: np.ndarray, one_to_one: bool) -> np.ndarray:
+def _pairs_from_j(j: np.ndarray, cost: np.ndarray, one_to_one: bool):
+    """The pairs ``(i, j[i])`` where ``j[i] >= 0`` and their costs, from the partner and
+    the pair's cost ``cost`` (m,) of every source node."""
     i = np.flatnonzero(j >= 0)
     pairs = np.stack([i, j[i]], axis=1)  # np.c_ costs 10 us more a call
     if one_to_one and len(pairs):  # a cyclic search may reuse a target once across the cut
-        order = np.argsort(cost[pairs[:, 0], pairs[:, 1]], kind="stable")
+        order = np.argsort(cost[i], kind="stable")
         _, first = np.unique(pairs[order, 1], return_index=True)
         pairs = pairs[np.sort(order[first])]
-    return pairs
+    return pairs, cost[pairs[:, 0]]
 
 
 @dataclass(frozen=True, eq=False)
@@ -138,27 +140,21 @@ class Costs:
     many: bool = False
 
 
-def _placed_costs(costs: Costs, x: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """``sq_dist(x, y) / h2 + F[rows]`` (m, n), bitwise, in one compiled pass
-    (:func:`._dp.placed_costs`) after the product ``2 x y^T``."""
-    from ._dp import placed_costs
-    y = costs.y
-    xx, yy = np.sum(x**2, axis=1), np.sum(y**2, axis=1)  # as features.sq_dist
-    return placed_costs(xx, yy, 2 * x @ y.T, costs.F, np.asarray(rows, np.intp),
-                        float(costs.h2))
-
-
 def pairs_at(costs: Costs, z: np.ndarray, rows: np.ndarray):
     """Pairs (row index, target index) for the source nodes ``rows`` (distinct, ascending)
-    placed at ``z``, and the cost matrix: order-preserving for contours, an assignment for
-    point sets."""
+    placed at ``z``, and their costs: order-preserving for contours (the cost of every
+    row made inside the compiled search, :func:`._dp.placed_search`, bitwise
+    ``sq_dist(z[rows], y) / h2 + F[rows]``), an assignment for point sets."""
+    x, y = z[rows], costs.y
     if costs.ordered:
-        C = _placed_costs(costs, z[rows], rows)
-        j, _ = ordered_pairs(C, costs.closed, SKIP, costs.repeat)
-        return _pairs_from_j(j, C, one_to_one=not costs.many), C
-    C = sq_dist(z[rows], costs.y) / costs.h2 + costs.F[rows]
+        from ._dp import placed_search
+        xx, yy = np.sum(x**2, axis=1), np.sum(y**2, axis=1)  # as features.sq_dist
+        j, cost = placed_search(xx, yy, 2 * x @ y.T, costs.F, np.asarray(rows, np.intp),
+                                float(costs.h2), SKIP, float(costs.repeat), costs.closed)
+        return _pairs_from_j(j, cost, one_to_one=not costs.many)
+    C = sq_dist(x, y) / costs.h2 + costs.F[rows]
     r, c = linear_sum_assignment(C)
-    return np.c_[r, c], C
+    return np.c_[r, c], C[r, c]
 
 
 def _trusted(pairs: np.ndarray, cost: np.ndarray, d: int) -> np.ndarray:
@@ -171,17 +167,16 @@ def _trusted(pairs: np.ndarray, cost: np.ndarray, d: int) -> np.ndarray:
 def trusted_pairs(costs: Costs, z: np.ndarray, sub: np.ndarray):
     """Search the source nodes ``sub`` placed at ``z``: the trusted pairs (source index,
     target index) and the total cost of all pairs."""
-    pairs, C = pairs_at(costs, z, sub)
-    cost = C[pairs[:, 0], pairs[:, 1]]
+    pairs, cost = pairs_at(costs, z, sub)
     rows = np.stack([sub[pairs[:, 0]], pairs[:, 1]], axis=1)
     return _trusted(rows, cost, z.shape[1]), cost.sum()
 
 
 def total(found: tuple, m: int) -> float:
-    """The search's objective from its pairs and cost matrix ``found``: pair costs plus
+    """The search's objective from its pairs and their costs ``found``: pair costs plus
     ``SKIP`` for every one of the ``m`` source nodes left unmatched."""
-    pairs, C = found
-    return float(C[pairs[:, 0], pairs[:, 1]].sum() + SKIP * (m - len(pairs)))
+    pairs, cost = found
+    return float(cost.sum() + SKIP * (m - len(pairs)))
 
 
 def objective(costs: Costs, z: np.ndarray) -> float:
@@ -191,11 +186,10 @@ def objective(costs: Costs, z: np.ndarray) -> float:
 
 def final_pairs(final: Costs, z: np.ndarray, found: tuple, reject: float):
     """The pairs ``found`` by the search on every source node placed at ``z`` (pairs
-    and cost matrix), less those costing more than ``reject`` and, on a closed target,
+    and their costs), less those costing more than ``reject`` and, on a closed target,
     those that would go round it twice. Returns the pairs (target indices in search
     order) and their costs."""
-    pairs, C = found
-    cost = C[pairs[:, 0], pairs[:, 1]]
+    pairs, cost = found
     keep = cost <= reject
     if final.closed:  # partners round the target once: none crossing at the cut or a step back
         keep &= _untangle(pairs[:, 1], cost, len(final.y), SKIP, strict=not final.many)
