@@ -57,6 +57,14 @@ def _nystrom(z0: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
     return kernel(z0, z0[landmarks]) @ (V[:, keep] / np.sqrt(s[keep]))
 
 
+def _sq_norm(v: np.ndarray) -> np.ndarray:
+    """``np.sum(v**2, axis=-1)`` bit for bit (a reduction over two adds them in order),
+    without numpy's slow reduction over a short last axis: 2D, 2.5x faster."""
+    if v.shape[-1] != 2:
+        return np.sum(v**2, axis=-1)
+    return v[..., 0] ** 2 + v[..., 1] ** 2
+
+
 def drift(fit: Fit, placed: Placement, pairs: np.ndarray) -> np.ndarray:
     """Coherent point drift (Myronenko & Song 2010) restricted to the band of each node's
     partner in ``pairs`` (the final search at ``placed.z``): the source nodes ``fit.sub``
@@ -78,7 +86,7 @@ def drift(fit: Fit, placed: Placement, pairs: np.ndarray) -> np.ndarray:
     # CPD's start: the mean squared distance between every source and target node
     sigma2 = (np.sum(zs**2) / len(zs) + np.sum(y**2) / len(y) - 2 * zs.mean(0) @ y.mean(0)) / d
     a = np.zeros((f.shape[1], d))
-    D = np.sum((zs[:, None, :] - yb) ** 2, axis=2)
+    D = _sq_norm(zs[:, None, :] - yb)
     for _ in range(_COHERENT_ROUNDS):
         # E-step: each target node shares one unit of weight among the bands that hold it
         K = np.where(valid, np.exp(-D / (2 * sigma2)), 0.0)
@@ -89,7 +97,7 @@ def drift(fit: Fit, placed: Placement, pairs: np.ndarray) -> np.ndarray:
         target = np.einsum("kb,kbd->kd", P, yb) - p1[:, None] * zs
         a = np.linalg.solve(f.T @ (p1[:, None] * f) + _COHERENT_LAMBDA * sigma2
                             * np.eye(f.shape[1]), f.T @ target)
-        D = np.sum((zs[:, None, :] + (f @ a)[:, None, :] - yb) ** 2, axis=2)
+        D = _sq_norm((zs + f @ a)[:, None, :] - yb)
         sigma2 = max(float(np.sum(P * D) / (p1.sum() * d)), floor)
     return z0 + f_all @ a
 
