@@ -41,6 +41,18 @@ def _candidates(row, skip, cand):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
+def _fill(out, value):  # pragma: no cover - compiled
+    for k in range(len(out)):  # from 0: no negative index to wrap, so vectorised
+        out[k] = value
+
+
+@numba.njit(cache=True, nogil=True)
+def _add(a, value, out):  # pragma: no cover - compiled
+    for k in range(len(out)):
+        out[k] = a[k] + value
+
+
+@numba.njit(cache=True, nogil=True)
 def _row(row, cand, nc, i, skip, repeat, doubled, Fa, Fn, events, e
          ):  # pragma: no cover - compiled
     """Row ``i`` of the programme: ``Fn`` (row i + 1 of ``F``) from ``Fa`` (row i), the
@@ -67,16 +79,14 @@ def _row(row, cand, nc, i, skip, repeat, doubled, Fa, Fn, events, e
                     b = mid
                 else:
                     a = mid + 1
-            for k in range(j, a):
-                Fn[1 + k] = run
+            _fill(Fn[1 + j:1 + a], run)
             j = a
             if j < stop:
                 skipping = True
                 if open_:
                     events[2, e - 1] = j
                     open_ = False
-        for k in range(j, stop):  # skipped: F[i, 1 + j] + skip only falls
-            Fn[1 + k] = Fa[1 + k] + skip
+        _add(Fa[1 + j:1 + stop], skip, Fn[1 + j:1 + stop])  # skipped: only falls
         if h == last:
             break
         p = Fa[stop]  # the candidate: previous target < stop, or == stop at a price
@@ -198,10 +208,14 @@ def placed_search(xx, yy, G2, S, rows, h2, skip, repeat, doubled
     events = np.empty((3, 4 * m + 2 * n), np.intp)
     starts = np.zeros(m + 1, np.intp)
     near = skip * h2 * (1.0 + 1e-12)  # S >= 0: a pair farther than this costs > skip
+    close = np.empty(n, np.bool_)
     for i in range(m):
+        x2, g = xx[i], G2[i]
+        for k in range(n):  # vectorised: which pairs may cost at most skip
+            close[k] = (x2 + yy[k]) - g[k] <= near
         nc = 0
         for k in range(n):  # the row's candidates; the others' costs are never read
-            if (xx[i] + yy[k]) - G2[i, k] <= near:
+            if close[k]:
                 row[k] = c = placed_cost(xx, yy, G2, S, rows[i], i, k, h2)
                 if c <= skip:
                     cand[nc] = k
