@@ -53,16 +53,17 @@ def _add(a, value, out):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def _row(row, cand, nc, i, skip, repeat, doubled, Fa, Fn, events, e
-         ):  # pragma: no cover - compiled
-    """Row ``i`` of the programme: ``Fn`` (row i + 1 of ``F``) from ``Fa`` (row i), the
-    costs ``row`` (n,) and its columns ``cand[:nc]`` costing at most ``skip``; its events
-    from ``events[:, e]`` on where ``events`` has room. Between two candidates the least
+def _row(row, cand, i, rule, F, events, e):  # pragma: no cover - compiled
+    """Row ``i`` of the programme under ``rule = (skip, repeat, doubled)``: row i + 1 of
+    ``F`` from row i (``F`` keeps two rows, ``F[i % 2]`` is row i), the costs ``row`` (n,)
+    and its columns ``cand`` costing at most ``skip``; its events from ``events[:, e]`` on
+    where ``events`` has room. Between two candidates the least
     ``T`` so far is fixed: ``F`` is that, until skipping the row is cheaper, then skipping
     (``F[i]`` does not rise along the row: the column where skipping wins is bisected,
     the rest are two vectorised fills).
     Returns the next free event."""
-    n = len(row)
+    skip, repeat, doubled = rule
+    n, nc, Fa, Fn = len(row), len(cand), F[i % 2], F[1 - i % 2]
     N = 2 * n if doubled else n
     repeats = repeat < np.inf and i > 0
     record = events.shape[1] > 0
@@ -146,38 +147,38 @@ def _backtrack(events, starts, N):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def ordered(C, skip, repeat, doubled):  # pragma: no cover - compiled
-    """Order-preserving matching over ``C`` (m, n), C-contiguous float64, its columns
-    twice over where ``doubled``. Returns ``j`` (m,), -1 where the source node is
-    unmatched (columns of the doubled target: 0..2n - 1), and the least total cost."""
+def ordered(C, rule):  # pragma: no cover - compiled
+    """Order-preserving matching over ``C`` (m, n), C-contiguous float64, under ``rule =
+    (skip, repeat, doubled)`` (``doubled``: its columns twice over). Returns ``j`` (m,),
+    -1 where the source node is unmatched (columns of the doubled target: 0..2n - 1), and
+    the least total cost."""
     m, n = C.shape
-    N = 2 * n if doubled else n
+    N = 2 * n if rule[2] else n
     F = np.empty((2, N + 1))
     F[0, :] = 0.0
     events = np.empty((3, 4 * m + 2 * n), np.intp)
     starts = np.zeros(m + 1, np.intp)
     cand = np.empty(n, np.intp)
     for i in range(m):
-        nc = _candidates(C[i], skip, cand)
+        nc = _candidates(C[i], rule[0], cand)
         events = _room(events, starts[i], n)
-        starts[i + 1] = _row(C[i], cand, nc, i, skip, repeat, doubled, F[i % 2],
-                             F[1 - i % 2], events, starts[i])
+        starts[i + 1] = _row(C[i], cand[:nc], i, rule, F, events, starts[i])
     return _backtrack(events, starts, N), F[m % 2, N]
 
 
 @numba.njit(cache=True, nogil=True)
-def totals(C, skip, repeat, doubled):  # pragma: no cover - compiled
+def totals(C, rule):  # pragma: no cover - compiled
     """The least total cost of :func:`ordered` for each problem of ``C`` (b, m, n)."""
     b, m, n = C.shape
-    F = np.empty((2, (2 * n if doubled else n) + 1))
+    F = np.empty((2, (2 * n if rule[2] else n) + 1))
     none = np.empty((3, 0), np.intp)
     cand = np.empty(n, np.intp)
     out = np.empty(b)
     for k in range(b):
         F[0, :] = 0.0
         for i in range(m):
-            nc = _candidates(C[k, i], skip, cand)
-            _row(C[k, i], cand, nc, i, skip, repeat, doubled, F[i % 2], F[1 - i % 2], none, 0)
+            nc = _candidates(C[k, i], rule[0], cand)
+            _row(C[k, i], cand[:nc], i, rule, F, none, 0)
         out[k] = F[m % 2, F.shape[1] - 1]
     return out
 
@@ -192,8 +193,7 @@ def placed_cost(xx, yy, G2, S, r, i, j, h2):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def placed_search(xx, yy, G2, S, rows, h2, skip, repeat, doubled
-                  ):  # pragma: no cover - compiled
+def placed_search(xx, yy, G2, S, rows, h2, rule):  # pragma: no cover - compiled
     """:func:`ordered` over the cost of source nodes placed at ``x`` against the target
     ``y``, :func:`placed_cost`, each row made when the search reaches it (no (m, n) cost
     array), and only where the squared distance alone does not exceed ``skip`` (the
@@ -201,7 +201,8 @@ def placed_search(xx, yy, G2, S, rows, h2, skip, repeat, doubled
     ``j`` (m,) on the target itself (0..n - 1) and the cost of each pair (m,) (``inf``
     where unmatched)."""
     m, n = G2.shape
-    N = 2 * n if doubled else n
+    skip = rule[0]
+    N = 2 * n if rule[2] else n
     F = np.empty((2, N + 1))
     F[0, :] = 0.0
     row, cand = np.empty(n), np.empty(n, np.intp)
@@ -221,8 +222,7 @@ def placed_search(xx, yy, G2, S, rows, h2, skip, repeat, doubled
                     cand[nc] = k
                     nc += 1
         events = _room(events, starts[i], n)
-        starts[i + 1] = _row(row, cand, nc, i, skip, repeat, doubled, F[i % 2],
-                             F[1 - i % 2], events, starts[i])
+        starts[i + 1] = _row(row, cand[:nc], i, rule, F, events, starts[i])
     j = _backtrack(events, starts, N)
     cost = np.full(m, np.inf)
     for i in range(m):

@@ -87,16 +87,17 @@ def drift(fit: Fit, placed: Placement, pairs: np.ndarray) -> np.ndarray:
     sigma2 = (np.sum(zs**2) / len(zs) + np.sum(y**2) / len(y) - 2 * zs.mean(0) @ y.mean(0)) / d
     a = np.zeros((f.shape[1], d))
     D = _sq_norm(zs[:, None, :] - yb)
+    held, eye, tiny = band[valid], np.eye(f.shape[1]), np.finfo(float).tiny
     for _ in range(_COHERENT_ROUNDS):
         # E-step: each target node shares one unit of weight among the bands that hold it
         K = np.where(valid, np.exp(-D / (2 * sigma2)), 0.0)
-        share = np.bincount(band[valid], K[valid], minlength=len(y))
-        P = K / np.maximum(share[band], np.finfo(float).tiny)
+        share = np.bincount(held, K[valid], minlength=len(y))
+        P = K / np.maximum(share[band], tiny)
         p1 = P.sum(axis=1)
         # M-step: the field's coefficients (CPD's W, in the Nystrom features)
         target = np.einsum("kb,kbd->kd", P, yb) - p1[:, None] * zs
-        a = np.linalg.solve(f.T @ (p1[:, None] * f) + _COHERENT_LAMBDA * sigma2
-                            * np.eye(f.shape[1]), f.T @ target)
+        a = np.linalg.solve(f.T @ (p1[:, None] * f) + _COHERENT_LAMBDA * sigma2 * eye,
+                            f.T @ target)
         D = _sq_norm((zs + f @ a)[:, None, :] - yb)
         sigma2 = max(float(np.sum(P * D) / (p1.sum() * d)), floor)
     return z0 + f_all @ a

@@ -58,8 +58,8 @@ def _monotone(C: np.ndarray, skip: float, repeat: float = np.inf, closed: bool =
     costing at most ``skip``.
     """
     from ._dp import ordered  # numba loads with the first search, not with the package
-    j, best = ordered(np.ascontiguousarray(C, dtype=np.float64), float(skip), float(repeat),
-                      closed)
+    j, best = ordered(np.ascontiguousarray(C, dtype=np.float64),
+                      (float(skip), float(repeat), bool(closed)))
     return j, float(best)
 
 
@@ -70,7 +70,7 @@ def monotone_totals(C: np.ndarray, skip: float, repeat: float = np.inf,
     from ._dp import totals
     *batch, m, n = C.shape
     flat = np.ascontiguousarray(C, dtype=np.float64).reshape(-1, m, n)
-    return totals(flat, float(skip), float(repeat), closed).reshape(batch)
+    return totals(flat, (float(skip), float(repeat), bool(closed))).reshape(batch)
 
 
 def ordered_pairs(C: np.ndarray, closed: bool, skip: float, repeat: float):
@@ -150,7 +150,7 @@ def pairs_at(costs: Costs, z: np.ndarray, rows: np.ndarray):
         from ._dp import placed_search
         xx, yy = np.sum(x**2, axis=1), np.sum(y**2, axis=1)  # as features.sq_dist
         j, cost = placed_search(xx, yy, 2 * x @ y.T, costs.F, np.asarray(rows, np.intp),
-                                float(costs.h2), SKIP, float(costs.repeat), costs.closed)
+                                float(costs.h2), (SKIP, float(costs.repeat), bool(costs.closed)))
         return _pairs_from_j(j, cost, one_to_one=not costs.many)
     C = sq_dist(x, y) / costs.h2 + costs.F[rows]
     r, c = linear_sum_assignment(C)
