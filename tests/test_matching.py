@@ -325,6 +325,25 @@ def test_compiled_pose_costs_are_numpys_bit_for_bit():
     assert_array_equal(pose_costs(rots, x, y, 0.3, S), D)
 
 
+def test_compiled_coherent_steps_are_numpys_bit_for_bit():
+    """The coherent pass's compiled E-step (shares of the band weights) and band
+    distances equal numpy's expressions bit for bit, bands past an open end included."""
+    from modalmorph.matching._dp import band_sq_dist, shared_weights
+    rng = np.random.default_rng(6)
+    k, w, n = 30, 17, 40
+    band = (np.arange(k)[:, None] + np.arange(w) - 8) % n
+    band[:3, :5] = -1  # past the end of an open target
+    valid = band >= 0
+    z, yb = rng.standard_normal((k, 2)), rng.standard_normal((k, w, 2))
+    D = np.sum((z[:, None, :] - yb) ** 2, axis=2)
+    assert_array_equal(band_sq_dist(z, yb), D)
+    E = np.exp(-D / 0.7)
+    K = np.where(valid, E, 0.0)
+    share = np.bincount(band[valid], K[valid], minlength=n)
+    assert_array_equal(shared_weights(E, valid, band, n),
+                       K / np.maximum(share[band], np.finfo(float).tiny))
+
+
 def test_point_set_pose_among_four():
     """An asymmetric blob and a bent, twisted, rotated, shuffled copy (the scale
     benchmark's 3D pair at 2000 nodes): on the coarse pose test alone a pose 180 degrees

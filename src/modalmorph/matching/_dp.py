@@ -25,7 +25,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["ordered", "totals", "placed_search", "placed_cost", "pose_costs"]
+__all__ = ["ordered", "totals", "placed_search", "placed_cost", "pose_costs", "shared_weights",
+           "band_sq_dist"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -252,4 +253,39 @@ def pose_costs(rots, x, y, h2, S):  # pragma: no cover - compiled
             for j in range(n):
                 zy = z0 * y[j, 0] + z1 * y[j, 1]
                 D[k, i, j] = ((zz + yy[j]) - 2 * zy) / h2 + S[i, j]
+    return D
+
+
+_TINY = np.finfo(np.float64).tiny
+
+
+@numba.njit(cache=True, nogil=True)
+def shared_weights(E, valid, band, n):  # pragma: no cover - compiled
+    """The coherent pass's E-step after the exponential ``E`` (k, b): ``K = E`` where
+    ``valid`` (else 0), each of the ``n`` target nodes' ``share`` of it (``np.bincount``
+    in its order) and ``P = K / max(share[band], tiny)``, bit for bit numpy's."""
+    k, w = E.shape
+    share = np.zeros(n)
+    for i in range(k):
+        for j in range(w):
+            if valid[i, j]:
+                share[band[i, j]] += E[i, j]
+    P = np.zeros((k, w))
+    for i in range(k):
+        for j in range(w):
+            if valid[i, j]:
+                s = share[band[i, j]]
+                P[i, j] = E[i, j] / (s if s >= _TINY or s != s else _TINY)
+    return P
+
+
+@numba.njit(cache=True, nogil=True)
+def band_sq_dist(z, yb):  # pragma: no cover - compiled
+    """``np.sum((z[:, None, :] - yb) ** 2, axis=2)`` (k, b) for 2D ``z`` (k, 2) and
+    ``yb`` (k, b, 2), bit for bit (numpy adds the two squares in order)."""
+    k, w = yb.shape[0], yb.shape[1]
+    D = np.empty((k, w))
+    for i in range(k):
+        for j in range(w):
+            D[i, j] = (z[i, 0] - yb[i, j, 0]) ** 2 + (z[i, 1] - yb[i, j, 1]) ** 2
     return D

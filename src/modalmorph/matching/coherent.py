@@ -57,12 +57,12 @@ def _nystrom(z0: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
     return kernel(z0, z0[landmarks]) @ (V[:, keep] / np.sqrt(s[keep]))
 
 
-def _sq_norm(v: np.ndarray) -> np.ndarray:
-    """``np.sum(v**2, axis=-1)`` bit for bit (a reduction over two adds them in order),
-    without numpy's slow reduction over a short last axis: 2D, 2.5x faster."""
-    if v.shape[-1] != 2:
-        return np.sum(v**2, axis=-1)
-    return v[..., 0] ** 2 + v[..., 1] ** 2
+def _band_sq_dist(z: np.ndarray, yb: np.ndarray) -> np.ndarray:
+    """``np.sum((z[:, None, :] - yb) ** 2, axis=2)`` (k, b), bit for bit; 2D compiled."""
+    if z.shape[1] != 2:
+        return np.sum((z[:, None, :] - yb) ** 2, axis=2)
+    from ._dp import band_sq_dist
+    return band_sq_dist(np.ascontiguousarray(z), yb)
 
 
 def drift(fit: Fit, placed: Placement, pairs: np.ndarray) -> np.ndarray:
@@ -86,19 +86,18 @@ def drift(fit: Fit, placed: Placement, pairs: np.ndarray) -> np.ndarray:
     # CPD's start: the mean squared distance between every source and target node
     sigma2 = (np.sum(zs**2) / len(zs) + np.sum(y**2) / len(y) - 2 * zs.mean(0) @ y.mean(0)) / d
     a = np.zeros((f.shape[1], d))
-    D = _sq_norm(zs[:, None, :] - yb)
-    held, eye, tiny = band[valid], np.eye(f.shape[1]), np.finfo(float).tiny
+    D = _band_sq_dist(zs, yb)
+    eye = np.eye(f.shape[1])
+    from ._dp import shared_weights  # compiled, numpy's operations in its order
     for _ in range(_COHERENT_ROUNDS):
         # E-step: each target node shares one unit of weight among the bands that hold it
-        K = np.where(valid, np.exp(-D / (2 * sigma2)), 0.0)
-        share = np.bincount(held, K[valid], minlength=len(y))
-        P = K / np.maximum(share[band], tiny)
+        P = shared_weights(np.exp(-D / (2 * sigma2)), valid, band, len(y))
         p1 = P.sum(axis=1)
         # M-step: the field's coefficients (CPD's W, in the Nystrom features)
         target = np.einsum("kb,kbd->kd", P, yb) - p1[:, None] * zs
         a = np.linalg.solve(f.T @ (p1[:, None] * f) + _COHERENT_LAMBDA * sigma2 * eye,
                             f.T @ target)
-        D = _sq_norm((zs + f @ a)[:, None, :] - yb)
+        D = _band_sq_dist(zs + f @ a, yb)
         sigma2 = max(float(np.sum(P * D) / (p1.sum() * d)), floor)
     return z0 + f_all @ a
 
