@@ -185,7 +185,8 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
     costs = Costs(src.normalized, tgt.normalized, p.F, tgt.spacing**2, p.ordered, p.closed)
     pose = contour_pose(p) if p.ordered else cloud_pose(p, costs, sub)
     order = np.arange(tgt.m)[::-1] if pose.reverse else np.arange(tgt.m)
-    costs = replace(costs, y=costs.y[order], F=costs.F[:, order])
+    if pose.reverse:  # the target in search order (np.take: C order, rows read whole)
+        costs = replace(costs, y=costs.y[order], F=np.take(costs.F, order, axis=1))
     fit, final = fits(p, pose, costs, sub)
     placed = alternate(fit, pose.sim, pose.rotate)
     if opts.rotation == "auto" and pose.common:
