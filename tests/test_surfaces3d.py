@@ -201,8 +201,8 @@ def test_carried_nodes_are_pulled_onto_the_target_faces():
     target = TURN.apply(b * RADII)
     pairs = np.c_[np.arange(162), np.arange(162)]
     for faces in (fb, None):
-        loads = LoadTargets(a, target, pairs, ordered=False, closed=True, target_faces=faces)
-        goal = loads.targets(a)
+        loads = LoadTargets(a, target, pairs, ordered=False, closed=True)
+        goal = (loads if faces is None else loads.onto_faces(faces)).targets(a)
         off = np.linalg.norm(goal - closest_on_faces(goal, target, fb), axis=1)
         assert (off.max() < 1e-12) == (faces is not None), off.max()
 
