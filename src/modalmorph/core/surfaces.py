@@ -27,7 +27,7 @@ log = logging.getLogger(__name__)
 # and (2, 1, 0.5) ellipsoids of 42-2562 vertices): 4 faces missed the closest point for up
 # to 1.8 % of the points (by up to 0.13 spacings), 8 for up to 0.04 % (0.06), 16 for none.
 FACE_CANDIDATES = 16
-BLOCK = 1 << 15  # points at once: about 40 MB of work arrays
+BLOCK = 1 << 12  # points at once (x FACE_CANDIDATES faces): 35 MB peak for 100 000
 # A turn of the pairs (degrees) beyond which the message suggests taking it first: the
 # morph moves every node straight towards its target, and halfway through a turn by t a
 # surface is flattened to cos(t / 2) across it. The bunny turned 90 deg (its true pairs)

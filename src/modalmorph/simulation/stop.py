@@ -173,12 +173,14 @@ class SurfaceStop(StopTest):
     ``floor`` exceeds ``COARSE_FLOOR`` tolerances hides any distance below it: the mean
     distance of the pulled pairs, ``near``, then counts too (``pairs``). Surfaces with
     faces are their triangles: the shape's distance to a target with ``faces`` is to
-    them, and the target's to the shape when the source has ``source_faces`` and is not
-    coarser than the target, exact, with no floor (the quadrics of a coarse target's
-    vertices pass off its faces: a sphere of 642 vertices said converged on an ellipsoid
-    of 162 lay 2 tolerances off its faces, method.md §5). With ``lazy`` the surfaces are
-    measured only once ``near`` is within ``gate``, the tolerance plus ``LAZY_SPACINGS``
-    target spacings."""
+    them, exact, with no floor (the quadrics of a coarse target's vertices pass off its
+    faces: a sphere of 642 vertices said converged on an ellipsoid of 162 lay 2
+    tolerances off its faces, method.md §5); the target's vertices' to the shape, when
+    the source has ``source_faces`` and is not coarser than the target, is to the
+    shape's faces less ``floor`` (a smooth shape may round a coarse target's corners by
+    as much as they stand off a smooth surface through their neighbours). With ``lazy``
+    the surfaces are measured only once ``near`` is within ``gate``, the tolerance plus
+    ``LAZY_SPACINGS`` target spacings."""
 
     lazy = True
 
@@ -188,6 +190,7 @@ class SurfaceStop(StopTest):
         self.target = target
         self.faces = faces
         self.tree = cKDTree(target)
+        self.face_tree = None if faces is None else cKDTree(target[faces].mean(axis=1))
         self.floor = float(to_surface(target, target, self.tree, skip=1).mean())
         spacing = self.tree.query(target, k=2)[0][:, 1].mean()
         self.gate = limits.tolerance + LAZY_SPACINGS * spacing
@@ -197,7 +200,7 @@ class SurfaceStop(StopTest):
             left = float(to_surface(target, sample, cKDTree(sample)).mean())
             self.coarse = max(left - self.floor, 0.0)
         self.source_faces = source_faces if m is not None and m >= len(target) else None
-        quadrics = faces is None or self.source_faces is None  # a floor hides d_ab
+        quadrics = faces is None or self.source_faces is None  # whose floor hides
         self.pairs = quadrics and self.floor > COARSE_FLOOR * limits.tolerance
 
     def distance(self, current: np.ndarray, near: float, lazy: bool = True) -> float:
@@ -207,8 +210,8 @@ class SurfaceStop(StopTest):
         if self.faces is None:
             d_ab = float(to_surface(current, Y, self.tree).mean()) - self.floor
         else:
-            d_ab = float(np.linalg.norm(current - closest_on_faces(current, Y, self.faces),
-                                        axis=1).mean())
+            on = closest_on_faces(current, Y, self.faces, self.face_tree)
+            d_ab = float(np.linalg.norm(current - on, axis=1).mean())
         if self.source_faces is None:
             d_ba = max(float(to_surface(Y, current, cKDTree(current)).mean()) - self.coarse,
                        self.floor) - self.floor
