@@ -52,7 +52,7 @@ from scipy.spatial import cKDTree
 
 from ..core.align import Similarity, align
 from ..core.dynamics import contour_partners
-from ..core.quality import area, check_contours
+from ..core.quality import check_contours
 from ..core.shape import Shape, as_shape, check_pairs, even_subset, spread_indices
 from ..errors import OptionError, ShapeError
 from ..options import METHODS, ROTATIONS, MatchOptions
@@ -90,7 +90,6 @@ FINE_CLOUD = 100_000
 CARRY = 4
 ALTERNATION_NODES = 400  # nodes in the alternation (at 1000: 0.52 -> 0.27 s, same precision)
 MAX_AFFINITY = 4e7  # largest m x n affinity the paper's searches build (memory; not measured)
-FLAT_AREA = 5e-10  # area / RMS radius^2 of a closed contour on one line (rounding ~1e-16)
 _REJECT = 16.0  # pairs costing more are dropped: 4 target spacings (not measured)
 
 
@@ -186,7 +185,8 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
     costs = Costs(src.normalized, tgt.normalized, p.F, tgt.spacing**2, p.ordered, p.closed)
     pose = contour_pose(p) if p.ordered else cloud_pose(p, costs, sub)
     order = np.arange(tgt.m)[::-1] if pose.reverse else np.arange(tgt.m)
-    costs = replace(costs, y=costs.y[order], F=costs.F[:, order])
+    if pose.reverse:  # the target in search order (np.take: C order, rows read whole)
+        costs = replace(costs, y=costs.y[order], F=np.take(costs.F, order, axis=1))
     fit, final = fits(p, pose, costs, sub)
     placed = alternate(fit, pose.sim, pose.rotate)
     if opts.rotation == "auto" and pose.common:
@@ -332,13 +332,7 @@ def _shapes(source, target) -> tuple[Shape, Shape]:
     src, tgt = as_shape(source, "source"), as_shape(target, "target")
     for name, shape in (("source", src), ("target", tgt)):
         if shape.dim == 2 and shape.ordered:
-            check_contours(shape, name)
-        if shape.dim == 2 and shape.ordered and shape.closed and min(
-                abs(area(shape.normalized[r])) for r in shape.slices) < FLAT_AREA:
-            raise ShapeError(f"{name} is a closed contour with no area (its nodes lie on "
-                             "one line): a closed contour must enclose an area; for an open "
-                             "curve pass Shape(points, closed=False), or in a file "
-                             "JSON {\"closed\": false} or an NPZ 'closed' array")
+            check_contours(shape, name)  # simple, and closed ones with an area
     if src.dim != tgt.dim:
         raise ShapeError(f"source and target must have the same dimension, got "
                          f"{src.dim}D and {tgt.dim}D")
