@@ -126,7 +126,9 @@ def _room(events, e, n):  # pragma: no cover - compiled
     if e + 2 * n <= events.shape[1]:
         return events
     grown = np.empty((3, 2 * (e + 2 * n)), np.intp)
-    grown[:, :e] = events[:, :e]
+    for r in range(3):  # loops: a 2D slice assignment takes numba 5 s to compile
+        for k in range(e):
+            grown[r, k] = events[r, k]
     return grown
 
 
