@@ -88,6 +88,13 @@ FINE_CLOUD = 100_000
 # Coarse or subset nodes whose moves carry a node (inverse-distance weights): the nodes so
 # carried land as well as the subset's own (1M blob: 3.79 and 3.82 spacings).
 CARRY = 4
+# refine() of a 3D point set starts at the resolution of the modal matcher's nodes / this
+# (benchmarks/match3d.py, median in target spacings, 4 -> 16: blob cut 10 000 at 180 deg
+# 2.12 -> 1.33, torus cut 1000 at 30 deg modulo its symmetry 0.85 -> 0.33, blob uneven
+# 1000 at 30 deg 1.27 -> 1.18, blob cut 10 000 at 30 deg 0.80 -> 0.87, the rest of 30
+# cases at 1000 and 12 at 10 000 within 0.05; blob 100 000 at 30 deg 0.89 -> 0.87,
+# 14.0 -> 14.9 CPU-s).
+REFINE_FROM = 16
 ALTERNATION_NODES = 400  # nodes in the alternation (at 1000: 0.52 -> 0.27 s, same precision)
 MAX_AFFINITY = 4e7  # largest m x n affinity the paper's searches build (memory; not measured)
 FLAT_AREA = 5e-10  # area / RMS radius^2 of a closed contour on one line (rounding ~1e-16)
@@ -267,14 +274,15 @@ def _cloud_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> 
     """Where each source node of a 3D point set lands on the target (the target's
     normalised frame), (m, 3): the modal matcher (above ``LARGE`` nodes on one coarse node per
     ``NODES_PER_COARSE_CLOUD``, from ``COARSE`` to ``COARSE_CLOUD``), then
-    :func:`modalmorph.matching.clouds.refine`."""
+    :func:`modalmorph.matching.clouds.refine`, from a resolution ``REFINE_FROM`` times
+    coarser than the modal matcher's."""
     m = max(src.m, tgt.m)
     coarse = min(max(m // NODES_PER_COARSE_CLOUD, COARSE), COARSE_CLOUD)
     if m > LARGE:
         *_, landed = _match_large(src, tgt, n_modes, opts, coarse)
     else:
         *_, landed = _match_auto(src, tgt, n_modes, opts)
-    start = min(src.m, coarse) // 4
+    start = min(src.m, coarse) // REFINE_FROM
     return refine(src.normalized, tgt.to_normalized(landed), tgt.normalized, start)
 
 
