@@ -57,15 +57,16 @@ _TEMPERATURE = 0.5  # width of the transport's Gaussian, x the level's cube widt
 # within 0.02 spacings but the torus cut at 90 deg modulo its symmetry (1.29 -> 1.45),
 # 100 000 points unchanged (blob 0.87, bunny 0.83), 1 000 000: blob 4.06 -> 4.27.
 _RELAX = 0.955
-# Transport edges longer than this x the temperature dropped (weight below e^-2): a point
-# with none left goes nowhere (share 0) and is carried by its neighbours' moves, so a
-# part that the other side lacks is not dragged onto the nearest of what is there.
-# benchmarks/match3d.py, median (p90) in target spacings, 3 / 2 against none: blob cut
-# 10 000 at 30 deg 4.35 (16.7) -> 0.90 (9.3) / 0.80 (4.7); with 2 at 10 000 bunny cut
-# 30/180 deg 0.88/0.91 (p90 13.6/9.0) -> 0.63/0.69 (1.3); 1000 points, 5 shapes x
-# base/cut/uneven/warp25 x 30/180 deg: cuts' p90 1.7-2.6 -> 0.5-0.9 (torus cut 30 deg
-# modulo its symmetry 0.68 -> 0.85), the rest within 0.1; blob 100 000 at 30 deg 0.86 ->
-# 0.89.
+# A source point whose nearest target point lies farther than this x the temperature goes
+# nowhere (share 0) and is carried by its neighbours' moves, so a part that the target
+# lacks is not dragged onto the nearest of what is there; target points keep pulling
+# whatever is near them. benchmarks/match3d.py, median (p90) in target spacings, none ->
+# 2: blob cut 10 000 at 30/180 deg 4.35/2.12 (16.7/6.7) -> 0.92/1.00 (5.7/6.2), bunny cut
+# 10 000 0.88/0.91 (13.6/9.0) -> 0.61/0.67 (1.0/1.2), 1000-point cuts' p90 1.7-2.6 ->
+# 0.5-1.5. Every edge beyond the reach dropped instead (targets too): blob cut 10 000 at
+# 30 deg 0.80 (4.7), but an icosphere of 162 nodes onto an ellipsoid stretched x2 (642,
+# benchmarks/morph3d.py --surfaces) no longer stretched to its tips (distance 37 x the
+# tolerance; 4 temperatures: 12 x).
 _REACH = 2.0
 _WIDTH = 8.0  # smoothing width, x the level's cube width
 _STEP = 2.0  # ratio of the cube widths of successive levels
@@ -152,7 +153,8 @@ def _transport(z: np.ndarray, mu: np.ndarray, y: np.ndarray, nu: np.ndarray,
     barycentre and the total of its row of an unbalanced entropic transport plan
     (Sinkhorn scaling with the marginals relaxed, ``_RELAX``) on the sparse graph of each
     side's nearest points on the other (or on ``graph``, :func:`_graph` of an earlier
-    round), edges longer than ``_REACH`` temperatures left out. Matching the masses makes
+    round), a source point with no target point within ``_REACH`` temperatures left
+    unpaired. Matching the masses makes
     the source cover the target evenly, which slides it along the surface where nearest
     points alone would not; relaxing them, and the reach, let a part that one side lacks
     go unpaired, instead of pulling the rest of the other side over to cover it."""
@@ -165,24 +167,22 @@ def _transport(z: np.ndarray, mu: np.ndarray, y: np.ndarray, nu: np.ndarray,
         rows = np.r_[np.repeat(np.arange(s), k), i2.ravel()]
         cols = np.r_[j1.ravel(), np.repeat(np.arange(t), k)]
         dist = np.r_[d1.ravel(), d2.ravel()]
-        near = dist <= _REACH * temperature
-        P = coo_matrix((np.exp(-0.5 * (dist[near] / temperature) ** 2),
-                        (rows[near], cols[near])), shape=(s, t))
+        P = coo_matrix((np.exp(-0.5 * (dist / temperature) ** 2), (rows, cols)),
+                       shape=(s, t))
         P = P.tocsr()
         P.sum_duplicates()
+        lone = d1[:, 0] > _REACH * temperature
     else:
         rows = np.repeat(np.arange(s), np.diff(graph.indptr))
         d2 = np.sum((z[rows] - y[graph.indices]) ** 2, axis=1)
         P = graph.copy()
-        P.data = graph.data * np.exp(-0.5 * d2 / temperature**2) \
-            * (d2 <= (_REACH * temperature) ** 2)
-        P.eliminate_zeros()
+        P.data = graph.data * np.exp(-0.5 * d2 / temperature**2)
+        lone = np.minimum.reduceat(d2, graph.indptr[:-1]) > (_REACH * temperature) ** 2
     P.data = np.maximum(P.data, 1e-300)
-    lone_s, lone_t = np.diff(P.indptr) == 0, np.bincount(P.indices, minlength=t) == 0
     a, b = np.ones(s), np.ones(t)
     for _ in range(_SINKHORN if max(s, t) <= _MANY_POINTS else _SINKHORN_MANY):
-        a = np.where(lone_s, 0.0, mu / np.maximum(P @ b, 1e-300)) ** _RELAX
-        b = np.where(lone_t, 0.0, nu / np.maximum(P.T @ a, 1e-300)) ** _RELAX
+        a = np.where(lone, 0.0, (mu / (P @ b)) ** _RELAX)
+        b = (nu / np.maximum(P.T @ a, 1e-300)) ** _RELAX
     plan = P.multiply(a[:, None]).multiply(b[None, :]).tocsr()
     row = np.asarray(plan.sum(axis=1)).ravel()
     return (plan @ y) / np.maximum(row, 1e-300)[:, None], np.minimum(row / mu, 1.0)
