@@ -89,11 +89,11 @@ FINE_CLOUD = 100_000
 # carried land as well as the subset's own (1M blob: 3.79 and 3.82 spacings).
 CARRY = 4
 # refine() of a 3D point set starts at the resolution of the modal matcher's nodes / this
-# (benchmarks/match3d.py, median in target spacings, 4 -> 16, measured with the reach of
-# clouds.py dropping every long edge: blob cut 10 000 at 180 deg 2.12 -> 1.33, torus cut
-# 1000 at 30 deg modulo its symmetry 0.85 -> 0.33, blob uneven 1000 at 30 deg 1.27 ->
-# 1.18, blob cut 10 000 at 30 deg 0.80 -> 0.87, the rest of 30 cases at 1000 and 12 at
-# 10 000 within 0.05; blob 100 000 at 30 deg 0.89 -> 0.87, 14.0 -> 14.9 CPU-s).
+# (benchmarks/match3d.py, median in target spacings, 4 -> 16: torus cut 1000 at 30 deg
+# modulo its symmetry 0.51 -> 0.31, blob cut 10 000 at 30/180 deg 0.76/1.18 -> 0.92/1.00,
+# bone warp25 1000 at 90 deg 0.54 -> 0.61, bunny cut 10 000 within 0.01; with the reach of
+# clouds.py dropping every long edge, 30 cases at 1000 and 12 at 10 000 within 0.05 but
+# those; blob 100 000 at 30 deg 0.89 -> 0.87, 14.0 -> 14.9 CPU-s).
 REFINE_FROM = 16
 ALTERNATION_NODES = 400  # nodes in the alternation (at 1000: 0.52 -> 0.27 s, same precision)
 MAX_AFFINITY = 4e7  # largest m x n affinity the paper's searches build (memory; not measured)
