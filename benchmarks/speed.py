@@ -14,7 +14,8 @@ library's BLAS thread policy: one thread up to 1000 nodes), the best of ``--repe
 runs after one warm-up, in wall-clock seconds and in CPU seconds of this process
 (``time.process_time``: on a busy machine the wall clock counts the time other work
 held the cores, the CPU time does not). A row per family and size: pairs, median, 90th
-percentile and worst. ``--reference K`` also times the dense transcription of the paper
+percentile and worst; also the median and worst CPU seconds of ``match`` alone (best of
+the same runs). ``--reference K`` also times the dense transcription of the paper
 (``morph.py``: G inverted, ``eigh(K, M)``, the affinity (8), the same Newmark steps) on
 the first K pairs of each family at each size, and prints the speed-up (reference /
 match + morph, CPU seconds, both on one BLAS thread; median and worst over those
@@ -77,8 +78,11 @@ def timed(fn, repeat: int):
     return min(wall), min(cpu), out
 
 
-def match_morph(a, b):
+def match_morph(a, b, match_cpu: list):
+    """``match`` then ``morph``; appends the CPU seconds of ``match`` to ``match_cpu``."""
+    c = time.process_time()
     matching = mm.match(a, b)
+    match_cpu.append(time.process_time() - c)
     return matching, mm.morph(a, b, matching=matching)
 
 
@@ -100,22 +104,27 @@ def distribution(values) -> str:
 
 
 def run_size(family: str, pairs, n: int, repeat: int, n_reference: int) -> str:
-    walls, cpus, ratios, failed = [], [], [], 0
+    walls, cpus, matches, ratios, failed = [], [], [], [], 0
     for k, (_, a, b) in enumerate(pairs):
         a, b = resample(a, n), resample(b, n)
+        match_cpu = []
         try:
-            wall, cpu, (matching, result) = timed(lambda a=a, b=b: match_morph(a, b), repeat)
+            wall, cpu, (matching, result) = timed(
+                lambda a=a, b=b, t=match_cpu: match_morph(a, b, t), repeat)
         except ValueError:  # a glyph outline the library refuses (it says why)
             failed += 1
             continue
         walls.append(wall)
         cpus.append(cpu)
+        matches.append(min(match_cpu[1:]))  # after the warm-up
         if k < n_reference:
             ratios.append(dense_reference(a, b, matching.pairs, result.steps) / cpu)
     speed = (f"{np.median(ratios):>6.1f}x {min(ratios):>6.1f}x" if ratios
              else f"{'-':>7} {'-':>7}")
+    match = (f"{np.median(matches):>8.4f} {max(matches):>8.4f}" if matches
+             else f"{'-':>8} {'-':>8}")
     return (f"{family:>7} {n:>5} {len(walls):>5} {failed:>4}  {distribution(walls)}  "
-            f"{distribution(cpus)}  {speed}")
+            f"{distribution(cpus)}  {match}  {speed}")
 
 
 def run_track(repeat: int) -> str:
@@ -151,7 +160,7 @@ def main(argv=None):
     families = corpus(args.chars)
     print(f"{'family':>7} {'nodes':>5} {'pairs':>5} {'fail':>4}  {'wall med':>8} "
           f"{'wall p90':>8} {'wall max':>8}  {'CPU med':>8} {'CPU p90':>8} {'CPU max':>8}  "
-          f"{'ref/ours':>7} {'worst':>7}")
+          f"{'match med':>8} {'match max':>8}  {'ref/ours':>7} {'worst':>7}")
     for n in args.sizes:
         for family in args.families:
             print(run_size(family, families[family], n, args.repeat, args.reference),

@@ -432,3 +432,17 @@ def test_a_self_crossing_contour_is_refused_with_where(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "target crosses itself: the segment from node" in err[0], err
     assert not (tmp_path / "out").exists()
+
+
+def test_points_on_a_line_are_refused_by_file_name_not_resampled(tmp_path, capsys):
+    # 20 nodes on one line, read closed: the closing edge makes them uneven, and resampled
+    # they would double back on themselves; the error names the file, not "source"
+    line = np.c_[np.linspace(0.0, 1.0, 20), np.linspace(0.0, 2.0, 20)]
+    np.savetxt(tmp_path / "line.csv", line, delimiter=",")
+    t = np.linspace(0.0, 2.0 * np.pi, 60, endpoint=False)
+    np.savetxt(tmp_path / "circle.csv", np.c_[np.cos(t), np.sin(t)], delimiter=",")
+    assert main(["morph", str(tmp_path / "line.csv"), str(tmp_path / "circle.csv"),
+                 "-o", str(tmp_path / "out")]) == 2
+    err = [x for x in capsys.readouterr().err.strip().splitlines() if "error" in x]
+    assert len(err) == 1 and "line.csv is a closed contour with no area" in err[0], err
+    assert not (tmp_path / "out").exists()

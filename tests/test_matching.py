@@ -231,28 +231,118 @@ def test_monotone_search_is_optimal():
 
 
 
-def test_search_within_candidate_spans_is_the_whole_search(monkeypatch):
-    """The search restricted to each row's columns costing at most ``skip`` (the default
-    from 256 columns) finds the very pairs and total of the whole-row search, bit for bit:
-    random costs with ties, doubled (cyclic) targets, repeats, and banded costs like a
-    placed contour's."""
-    from modalmorph.matching import search
+def _reference_search(C, skip, repeat):
+    """The order-preserving programme written plainly, whole rows (as numpy did it before
+    numba): F[i + 1, 1 + j] = min(F[i, 1 + j] + skip, min over k <= j of T[i, k]), the
+    backtrack from the last column taking the last column of the least T."""
+    m, n = C.shape
+    F = np.zeros((m + 1, n + 1))
+    T = np.zeros((m, n))
+    for i in range(m):
+        F[i + 1, 0] = skip * (i + 1)
+        prev = F[i, :-1] if i == 0 or not np.isfinite(repeat) else np.minimum(
+            F[i, 1:] + repeat, F[i, :-1])
+        T[i] = C[i] + prev
+        F[i + 1, 1:] = np.minimum(np.minimum.accumulate(T[i]), F[i, 1:] + skip)
+    j, cur = np.full(m, -1), n - 1
+    for i in range(m - 1, -1, -1):
+        if cur < 0:
+            break
+        a = cur - int(np.argmin(T[i, cur::-1]))
+        if T[i, a] < F[i, cur + 1] + skip:
+            j[i] = a
+            again = np.isfinite(repeat) and i > 0 and F[i, a + 1] + repeat < F[i, a]
+            cur = a if again else a - 1
+    return j, F[m, n]
+
+
+def test_compiled_search_is_the_plain_recurrence():
+    """The compiled search (each row within its columns costing at most ``skip``) finds the
+    very pairs and total of the plain whole-row recurrence, bit for bit: random costs with
+    ties, doubled (cyclic) targets, more rows than columns, rows with no candidate, repeats
+    and one-to-one, banded costs like a placed contour's; the batched totals too."""
     rng = np.random.default_rng(5)
-    problems = []
-    for t in range(300):
-        m, n = rng.integers(1, 30), rng.integers(1, 40)
+    for t in range(400):
+        m, n = rng.integers(0, 30), rng.integers(0, 40)
         C = (np.round(rng.random((m, n)) * 24) if t % 3 == 0 else rng.random((m, n)) * 40
-             if t % 3 == 1 else (np.arange(m)[:, None] * n / m - np.arange(n)) ** 2 / 4
-             + rng.random((m, n)) * 3)
-        problems.append((np.concatenate([C, C], axis=1) if t % 2 else C,
-                         (16.0, 4.0, 0.5)[t % 3], (np.inf, 4.0)[t // 3 % 2]))
-    whole = [_monotone(C, skip, repeat) for C, skip, repeat in problems]
-    monkeypatch.setattr(search, "_SPAN_MIN", 1)  # every problem within its spans
-    monkeypatch.setattr(search, "_SPAN_SHARE", 2.0)
-    for (C, skip, repeat), (j, total) in zip(problems, whole, strict=True):
-        j_span, total_span = _monotone(C, skip, repeat)
-        assert_array_equal(j_span, j)
-        assert total_span == total
+             if t % 3 == 1 else (np.arange(m)[:, None] * n / max(m, 1) - np.arange(n)) ** 2
+             / 4 + rng.random((m, n)) * 3)
+        if t % 5 == 0 and m:
+            C[rng.integers(0, m)] = 50.0  # a row with no candidate
+        closed = bool(t % 2)  # the search on the target doubled
+        skip, repeat = (16.0, 4.0, 0.5)[t % 3], (np.inf, 4.0)[t // 3 % 2]
+        j_ref, total_ref = _reference_search(np.tile(C, 1 + closed), skip, repeat)
+        j, total = _monotone(C, skip, repeat, closed)
+        assert_array_equal(j, j_ref)
+        assert total == total_ref
+        if m and n:
+            batch = np.stack([C, C[::-1], 2 * C])
+            expected = [_reference_search(np.tile(c, 1 + closed), skip, repeat)[1]
+                        for c in batch]
+            assert_array_equal(monotone_totals(batch, skip, repeat, closed), expected)
+
+
+def test_placed_search_is_numpys_costs_searched():
+    """The search that makes each row of the placed source's cost itself finds the pairs
+    of the search over numpy's cost ``sq_dist(x, y) / h2 + F[rows]`` and their costs, bit
+    for bit (nodes on top of each other, closed and open targets, repeats)."""
+    from modalmorph.matching.features import sq_dist
+    from modalmorph.matching.search import Costs, _pairs_from_j, ordered_pairs, pairs_at
+    rng = np.random.default_rng(8)
+    for m, n, closed, repeat in ((1, 1, True, np.inf), (7, 30, False, np.inf),
+                                 (40, 13, True, 4.0), (60, 50, True, np.inf)):
+        t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+        y = np.c_[np.cos(t), np.sin(t)]
+        z = np.c_[np.cos(t[0] + np.arange(m + 3) * 2 * np.pi / m), np.zeros(m + 3)]
+        z[:, 1] = rng.normal(0, 0.05, m + 3)
+        z[0] = y[0]  # a zero distance
+        F = rng.random((m + 3, n))
+        rows = np.sort(rng.choice(m + 3, m, replace=False))
+        h2 = (2 * np.pi / n) ** 2
+        costs = Costs(z, y, F, h2, True, closed, repeat, many=np.isfinite(repeat))
+        C = sq_dist(z[rows], y) / h2 + F[rows]
+        j, _ = ordered_pairs(C, closed, 16.0, repeat)
+        cost = np.where(j >= 0, C[np.arange(m), np.maximum(j, 0)], np.inf)
+        expected = _pairs_from_j(j, cost, one_to_one=not np.isfinite(repeat))
+        pairs, pair_cost = pairs_at(costs, z, rows)
+        assert len(pairs) > 0
+        assert_array_equal(pairs, expected[0])
+        assert_array_equal(pair_cost, expected[1])
+
+
+def test_compiled_pose_costs_are_numpys_bit_for_bit():
+    """The pose search's compiled 2D cost is numpy's (the turned nodes' products added in
+    einsum's order, then ``sq_dist / h2 + S``), bit for bit."""
+    from modalmorph.matching._dp import pose_costs
+    rng = np.random.default_rng(4)
+    t = rng.random(5) * 2 * np.pi
+    rots = np.stack([np.stack([np.cos(t), -np.sin(t)], -1), np.stack([np.sin(t), np.cos(t)], -1)],
+                    -2)
+    x, y, S = rng.standard_normal((9, 2)), rng.standard_normal((11, 2)), rng.random((9, 11))
+    z = np.einsum("rab,ib->ria", rots, x)
+    zy = np.einsum("ria,ja->rij", z, y)
+    D = (np.sum(z**2, -1)[:, :, None] + np.sum(y**2, -1)[None, None, :] - 2 * zy) / 0.3 + S
+    assert_array_equal(pose_costs(rots, x, y, 0.3, S), D)
+
+
+def test_compiled_coherent_steps_are_numpys_bit_for_bit():
+    """The coherent pass's compiled E-step (shares of the band weights) and band
+    distances equal numpy's expressions bit for bit, bands past an open end included."""
+    from modalmorph.matching._dp import band_sq_dist, shared_weights
+    rng = np.random.default_rng(6)
+    k, w, n = 30, 17, 40
+    band = (np.arange(k)[:, None] + np.arange(w) - 8) % n
+    band[:3, :5] = -1  # past the end of an open target
+    valid = band >= 0
+    z, yb = rng.standard_normal((k, 2)), rng.standard_normal((k, w, 2))
+    D = np.sum((z[:, None, :] - yb) ** 2, axis=2)
+    assert_array_equal(band_sq_dist(z, yb), D)
+    E = np.exp(-D / 0.7)
+    K = np.where(valid, E, 0.0)
+    share = np.bincount(band[valid], K[valid], minlength=n)
+    assert_array_equal(shared_weights(E, valid, band, n),
+                       K / np.maximum(share[band], np.finfo(float).tiny))
+
 
 def test_point_set_pose_among_four():
     """An asymmetric blob and a bent, twisted, rotated, shuffled copy (the scale

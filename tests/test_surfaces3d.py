@@ -8,8 +8,10 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 import modalmorph as mm
+from modalmorph.core import surfaces
 from modalmorph.core.affine import affine_fit_weights
 from modalmorph.core.dynamics import LoadTargets
+from modalmorph.core.surfaces import closest_on_faces
 from modalmorph.simulation.basis import flat, nodes
 from modalmorph.simulation.stop import Limits, SurfaceStop
 from modalmorph.simulation.system import ModalSystem
@@ -144,3 +146,78 @@ def test_bunny_reduced_model_stays_a_surface(angle):
     assert r.converged, r.message
     assert not np.any(r.self_intersections), r.self_intersections
     assert cKDTree(tgt.points).query(r.shapes[-1])[0].mean() < 0.02 * tgt.size
+
+
+def test_closest_on_faces_is_the_closest_point_of_any_face():
+    """Against every face searched (brute force), on an ellipsoid of 162 vertices, for
+    points up to two spacings off it: the same points to rounding; and the closest point
+    of one triangle in each of its 7 regions (face, edges, vertices)."""
+    b, fb = icosphere(2)
+    target = b * [2.0, 1.0, 0.5]
+    rng = np.random.default_rng(3)
+    points = target[rng.integers(len(target), size=400)] + 0.3 * rng.normal(size=(400, 3))
+    near = closest_on_faces(points, target, fb)
+    tri = target[fb]
+    every = surfaces._closest_on_triangles(np.repeat(points, len(fb), axis=0),
+                                           np.tile(tri, (len(points), 1, 1)))
+    d = np.linalg.norm(every.reshape(len(points), len(fb), 3) - points[:, None], axis=2)
+    np.testing.assert_allclose(np.linalg.norm(near - points, axis=1), d.min(axis=1),
+                               atol=1e-12)  # the same point, to rounding
+    one = np.array([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]])
+    queries = np.array([[0.2, 0.2, 1], [0.5, -1, 0], [-1, 0.5, 2], [1, 1, 0], [-1, -1, 0],
+                        [2, -0.5, 0], [-0.5, 2, 0]])
+    expected = [[0.2, 0.2, 0], [0.5, 0, 0], [0, 0.5, 0], [0.5, 0.5, 0], [0, 0, 0],
+                [1, 0, 0], [0, 1, 0]]
+    np.testing.assert_allclose(closest_on_faces(queries, one[0], [[0, 1, 2]]), expected,
+                               atol=1e-12)
+
+
+def test_surface_stop_measures_to_the_target_faces():
+    """A fine sphere's vertices put on a coarse ellipsoid's faces measure 0 (the
+    quadrics of its 162 vertices measured them 0.9 tolerances off), and moved off them
+    by 2 tolerances along the normals, 2 tolerances."""
+    limits = Limits(tolerance=0.005, at_rest=0.0, stall=False, max_steps=10)
+    a, fa = icosphere(3)
+    b, fb = icosphere(2)
+    target = b * RADII
+    on = closest_on_faces(a * RADII, target, fb)
+    stop = SurfaceStop(limits, target, m=642, faces=fb, source_faces=fa)
+    assert stop.distance(on, 0.0, lazy=False) < 1e-12
+    quadrics = SurfaceStop(limits, target, m=642)
+    assert quadrics.distance(on, 0.0, lazy=False) > 0.5 * limits.tolerance
+    normals = on / RADII**2
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    off = on + 2 * limits.tolerance * normals
+    np.testing.assert_allclose(stop.distance(off, 0.0, lazy=False), 2 * limits.tolerance,
+                               rtol=0.05)  # the normals of the faces, not of the ellipsoid
+
+
+def test_carried_nodes_are_pulled_onto_the_target_faces():
+    """A fine sphere onto a coarse ellipsoid, one source node pulled to each target
+    vertex: the others' targets lie on the ellipsoid's faces (to rounding); without the
+    faces, off them."""
+    a, fa = icosphere(3)
+    b, fb = icosphere(2)
+    target = TURN.apply(b * RADII)
+    pairs = np.c_[np.arange(162), np.arange(162)]
+    for faces in (fb, None):
+        loads = LoadTargets(a, target, pairs, ordered=False, closed=True)
+        goal = (loads if faces is None else loads.onto_faces(faces)).targets(a)
+        off = np.linalg.norm(goal - closest_on_faces(goal, target, fb), axis=1)
+        assert (off.max() < 1e-12) == (faces is not None), off.max()
+
+
+def test_a_large_turn_of_the_pairs_is_said_with_its_remedy():
+    """Surfaces that cut themselves while the pairs turn the source by more than
+    ``TURN_HINT`` degrees: the message names the turn and remove_rigid; a smaller turn
+    keeps the reduced model's hint. The turn is the similarity's angle."""
+    from modalmorph.core.align import Similarity
+    from modalmorph.core.surfaces import TURN_HINT, intersection_sentence
+
+    assert abs(Similarity(TURN.as_matrix(), 1.0, np.zeros(3)).angle
+               - np.degrees(TURN.magnitude())) < 1e-9
+    counts = np.array([0, 5, 0])
+    said = intersection_sentence(counts, model_nodes=400, nodes=642, turn=TURN_HINT + 79)
+    assert "turn the source by 169 deg" in said and "remove_rigid=true" in said
+    said = intersection_sentence(counts, model_nodes=400, nodes=642, turn=TURN_HINT - 1)
+    assert said.endswith("model_nodes=642 (a model of every node, not 400) may avoid them")

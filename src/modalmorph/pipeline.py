@@ -166,7 +166,11 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
     crossed = None
     if src.dim == 3 and src.faces is not None and len(src.faces):
         crossed = step_self_intersections(run.shapes, src.faces)
-    said = intersection_sentence(crossed, model_nodes=run.resolved.model_nodes, nodes=src.m)
+    turn = None
+    if crossed is not None and np.any(crossed) and not options.remove_rigid:
+        turn = align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]], scale=True).angle
+    said = intersection_sentence(crossed, model_nodes=run.resolved.model_nodes, nodes=src.m,
+                                 turn=turn)
     if sim.system.partners is not None:
         said += _unpaired(src, tgt, sim.system.partners)
     fields = {**vars(run), "message": run.message + said}

@@ -11,7 +11,6 @@ names, and the command line wins over it. What one run does is :mod:`modalmorph.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import logging
 import re
 import signal
@@ -30,6 +29,7 @@ from ..version import __version__
 from . import batch, strain
 from . import stance as stance_app
 from .app import serve
+from .progress import batch_progress, progress_bar
 from .runs import (
     BATCH_CLASSES,
     PAIR_CLASSES,
@@ -201,14 +201,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _demo_parser(p) -> None:
-    p.add_argument("--out", type=Path, default=Path("modalmorph-demo"),
+    p.add_argument("-o", "--out", type=Path, default=Path("modalmorph-demo"),
                    help="output folder (default: ./modalmorph-demo)")
 
 
 def _match_parser(p) -> None:
     p.add_argument("source", type=Path, help="source " + _INPUTS_HELP)
     p.add_argument("target", type=Path, help="target shape file (same formats)")
-    p.add_argument("--out", type=Path, default=None,
+    p.add_argument("-o", "--out", type=Path, default=None,
                    help="CSV file for the pairs (source,target,cost); default: stdout")
     p.add_argument("--plot", type=Path, default=None,
                    help="also draw the matches into this image (PNG, SVG, PDF)")
@@ -218,7 +218,7 @@ def _match_parser(p) -> None:
 def _morph_parser(p) -> None:
     p.add_argument("source", type=Path, help="source " + _INPUTS_HELP)
     p.add_argument("target", type=Path, help="target shape file (same formats)")
-    p.add_argument("--out", type=Path, required=True,
+    p.add_argument("-o", "--out", type=Path, required=True,
                    help="output folder (replaced as a whole)")
     _add_config(p)
     add_option_flags(p, PAIR_CLASSES)
@@ -230,7 +230,7 @@ def _track_parser(p) -> None:
                         "or CSVs (natural order), a multi-page TIFF, an (F, H, W) NPY stack "
                         "of masks, an NPZ with an (F, n, d) array, or a CSV with a frame "
                         "column")
-    p.add_argument("--out", type=Path, required=True,
+    p.add_argument("-o", "--out", type=Path, required=True,
                    help="output folder (replaced as a whole)")
     _add_config(p)
     add_option_flags(p, SEQUENCE_CLASSES)
@@ -243,7 +243,7 @@ def _batch_parser(p) -> None:
                         "underscores; cells are TOML values) or TOML ([[item]] tables with "
                         "the same keys); paths relative to it. Or a pressure file of many "
                         "trials (NPY/NPZ), or jiku (jiku-data's 600 trials): see --kind")
-    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("-o", "--out", type=Path, required=True, help="output folder")
     p.add_argument("--workers", type=int, default=None,
                    help="worker processes on this machine (default: one per core)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
@@ -383,7 +383,7 @@ def _run_match(args) -> int:
 def _run_morph(args) -> int:
     settings = _settings(args, PAIR_CLASSES)
     start = time.perf_counter()
-    with _progress(settings.morph.max_steps, quiet=args.quiet) as progress:
+    with progress_bar(settings.morph.max_steps, quiet=args.quiet) as progress:
         run = morph_files(args.source, args.target, args.out, settings, progress=progress)
     _report(run.result, run.files, time.perf_counter() - start, quiet=args.quiet)
     return _converged_code([run.result], said=not args.quiet)
@@ -393,7 +393,7 @@ def _run_track(args) -> int:
     if stance_app.is_pressure_stack(args.inputs):  # every part, not one (issue 24)
         return stance_app.track_stack(args)
     settings = _settings(args, SEQUENCE_CLASSES)
-    with _progress(None, quiet=args.quiet, what="tracking", unit="frame") as progress:
+    with progress_bar(None, quiet=args.quiet, what="tracking", unit="frame") as progress:
         run = track_files(args.inputs, args.out, settings, progress=None if progress is None
                           else (lambda frame, n_frames: progress(frame, None)))
     result = run.result
@@ -421,7 +421,7 @@ def _run_batch(args) -> int:
     engine = batch.Engine(args.engine, workers=args.workers, scheduler=args.scheduler)
     if engine.choice(len(items))[0]:
         _dask_logs(verbose=args.verbose)
-    with _batch_progress(quiet=args.quiet) as progress:
+    with batch_progress(quiet=args.quiet) as progress:
         done = batch.run(items, args.out, settings=settings, figures=args.figures,
                          force=args.force, keep_stale=args.keep_stale, engine=engine,
                          progress=progress)
@@ -498,7 +498,7 @@ def _run_demo(args) -> int:
             print(f"{name}: {what}", file=sys.stderr)
         start = time.perf_counter()
         with atomic_output_dir(args.out / name) as folder:
-            with _progress(settings.morph.max_steps, quiet=args.quiet) as progress:
+            with progress_bar(settings.morph.max_steps, quiet=args.quiet) as progress:
                 result = compute_morph(source, target, settings, progress=progress)
             written = write_morph(result, folder, settings)
         _report(result, [args.out / name / p for p in written], time.perf_counter() - start,
@@ -532,64 +532,6 @@ def _report(result, written, seconds: float, *, quiet: bool) -> None:
 def _list_files(paths) -> None:
     for path in paths:
         print(f"  wrote {path}")
-
-
-@contextlib.contextmanager
-def _progress(total: int | None, *, quiet: bool, what: str = "morphing", unit: str = "step"):
-    """A rich progress bar on a terminal, completed to 100 % when the run ends (its total
-    becomes the steps taken); nothing when quiet or not on a terminal."""
-    if quiet or not sys.stderr.isatty():
-        yield None
-        return
-    from rich.console import Console
-    from rich.progress import Progress
-
-    done = [0]
-    with Progress(console=Console(stderr=True)) as bar:
-        task = bar.add_task(what, total=total)
-
-        def update(step, distance):
-            done[0] = step
-            bar.update(task, completed=step, description=f"{what}: {unit} {step}" + (
-                "" if distance is None else f", mean distance of matched pairs {distance:.3g}"))
-
-        yield update
-        bar.update(task, total=max(done[0], 1), completed=max(done[0], 1))
-
-
-
-@contextlib.contextmanager
-def _batch_progress(*, quiet: bool):
-    """One rich progress bar over the items to compute: done of total, failed, rate and
-    ETA; nothing when quiet or not on a terminal."""
-    if quiet or not sys.stderr.isatty():
-        yield None
-        return
-    from rich.console import Console
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
-    columns = (TextColumn("batch"), BarColumn(), MofNCompleteColumn(),
-               TextColumn("{task.fields[failed]} failed"),
-               TextColumn("{task.fields[rate]}"), TimeElapsedColumn(), TextColumn("ETA"),
-               TimeRemainingColumn())
-    failed, start = [0], time.perf_counter()
-    with Progress(*columns, console=Console(stderr=True)) as bar:
-        task = bar.add_task("batch", total=None, failed=0, rate="")
-
-        def update(row, n_done, total):
-            failed[0] += row is not None and row.status == "failed"
-            rate = n_done / max(time.perf_counter() - start, 1e-9) * 60
-            bar.update(task, completed=n_done, total=total, failed=failed[0],
-                       rate=f"{rate:.0f} items/min" if n_done else "")
-
-        yield update
 
 
 if __name__ == "__main__":  # pragma: no cover

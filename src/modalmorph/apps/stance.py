@@ -59,7 +59,7 @@ def add_parser(command, add_option_flags, add_config, load_config) -> None:
     q.add_argument("--template", default=None,
                    help="the most typical image (default), mean, or an image number")
     for parser in (p, q):
-        parser.add_argument("--out", type=Path, required=True,
+        parser.add_argument("-o", "--out", type=Path, required=True,
                             help="output folder (replaced as a whole)")
         add_config(parser)
         add_option_flags(parser, (StanceOptions,))

@@ -42,7 +42,7 @@ def register(command, add_option_flags) -> None:
     p.add_argument("inputs", nargs="+", type=Path, metavar="FRAMES",
                    help="myocardium masks: PNG/TIFF files or a folder of them, a "
                         "multi-page TIFF, an (F, H, W) NPY/NPZ stack, a NIfTI 2D+t image")
-    p.add_argument("--out", type=Path, required=True,
+    p.add_argument("-o", "--out", type=Path, required=True,
                    help="output folder (replaced as a whole)")
     p.add_argument("--html", action="store_true", help="also report.html")
     p.add_argument("--figures", action=argparse.BooleanOptionalAction, default=True,

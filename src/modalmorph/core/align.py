@@ -52,6 +52,12 @@ class Similarity:
         return self.rotation.shape[0]
 
     @property
+    def angle(self) -> float:
+        """The rotation's angle in degrees, 0-180 (about its axis in 3D)."""
+        cos = (np.trace(self.rotation) - (self.dim - 2)) / 2  # trace: d - 2 + 2 cos
+        return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+
+    @property
     def matrix(self) -> np.ndarray:
         """Homogeneous matrix, shape (d + 1, d + 1)."""
         d = self.dim

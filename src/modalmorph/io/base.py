@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.quality import check_simple
 from ..core.shape import ImageFrame, Shape, resample, share
 from ..errors import InputFileError
 from ..options import ReadOptions
@@ -131,6 +132,9 @@ def make_shape(name, pts, *, faces=None, nodes=None, closed=True, frame=None,
         raise InputFileError(f"{name}: nodes= resamples 2D contours; this is a "
                              f"{pts.shape[1]}D "
                              f"{'surface' if faces is not None else 'point set'}")
+    if nodes is not None and closed and sum(contours or (len(pts),)) == len(pts):
+        for part in np.split(pts, np.cumsum(contours or (len(pts),))[:-1]):
+            check_simple(part, name)  # resampled, a flat one would double back on itself
     try:
         if nodes is not None:
             pts, contours = _resampled(pts, int(nodes), bool(closed), contours)

@@ -52,7 +52,7 @@ from scipy.spatial import cKDTree
 
 from ..core.align import Similarity, align
 from ..core.dynamics import contour_partners
-from ..core.quality import area, check_contours
+from ..core.quality import check_contours
 from ..core.shape import Shape, as_shape, check_pairs, even_subset, spread_indices
 from ..errors import OptionError, ShapeError
 from ..options import METHODS, ROTATIONS, MatchOptions
@@ -88,16 +88,22 @@ FINE_CLOUD = 100_000
 # Coarse or subset nodes whose moves carry a node (inverse-distance weights): the nodes so
 # carried land as well as the subset's own (1M blob: 3.79 and 3.82 spacings).
 CARRY = 4
-# refine() of a 3D point set starts at the resolution of the modal matcher's nodes / this
-# (benchmarks/match3d.py, median in target spacings, 4 -> 16: torus cut 1000 at 30 deg
-# modulo its symmetry 0.51 -> 0.31, blob cut 10 000 at 30/180 deg 0.76/1.18 -> 0.92/1.00,
-# bone warp25 1000 at 90 deg 0.54 -> 0.61, bunny cut 10 000 within 0.01; with the reach of
-# clouds.py dropping every long edge, 30 cases at 1000 and 12 at 10 000 within 0.05 but
-# those; blob 100 000 at 30 deg 0.89 -> 0.87, 14.0 -> 14.9 CPU-s).
-REFINE_FROM = 16
+# Passes of refine's first level, each from the best similarity of the landings before it,
+# on the subsets of a set above FINE_CLOUD (the pose the coarse match gives is 2 deg off and
+# refine alone halves that). 1 000 000 points, 30 deg, median pair error in target
+# spacings: blob 0 / 1 / 2 / 3 passes 4.30 / 3.22 / 2.75 / 2.71 (19.0 / 21.5 / 22.8 / 27.4
+# CPU-s); bunny 1.84 -> 1.74 (0 deg 1.73 -> 1.71, 90 deg 1.70 -> 1.39).
+POSE_PASSES = 2
+# refine() of a 3D point set up to FINE_CLOUD nodes starts this many times coarser than
+# the start _coarse_landing gives (16 times coarser than the modal matcher's nodes instead
+# of 4; benchmarks/match3d.py, median in target spacings, 1 -> 4: torus cut 1000 at 30
+# deg modulo its symmetry 0.51 -> 0.31, blob cut 10 000 at 30/180 deg 0.76/1.18 ->
+# 0.92/1.00, bone warp25 1000 at 90 deg 0.54 -> 0.61, bunny cut 10 000 within 0.01; with
+# the reach of clouds.py dropping every long edge, 30 cases at 1000 and 12 at 10 000
+# within 0.05 but those; blob 100 000 at 30 deg 0.89 -> 0.87, 14.0 -> 14.9 CPU-s).
+REFINE_COARSER = 4
 ALTERNATION_NODES = 400  # nodes in the alternation (at 1000: 0.52 -> 0.27 s, same precision)
 MAX_AFFINITY = 4e7  # largest m x n affinity the paper's searches build (memory; not measured)
-FLAT_AREA = 5e-10  # area / RMS radius^2 of a closed contour on one line (rounding ~1e-16)
 # Surface gaps compared up to this many target spacings (the pose search's _TRIM).
 # 500 points, pose vs alternation (1000 twisted: the alternation kept): cow uneven and cut
 # at 30 deg, after refine 4.38 -> 0.95, 1.74 -> 0.24 spacings; blob uneven 180 deg 3.06 -> 2.09.
@@ -197,7 +203,8 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
     costs = Costs(src.normalized, tgt.normalized, p.F, tgt.spacing**2, p.ordered, p.closed)
     pose = contour_pose(p) if p.ordered else cloud_pose(p, costs, sub)
     order = np.arange(tgt.m)[::-1] if pose.reverse else np.arange(tgt.m)
-    costs = replace(costs, y=costs.y[order], F=costs.F[:, order])
+    if pose.reverse:  # the target in search order (np.take: C order, rows read whole)
+        costs = replace(costs, y=costs.y[order], F=np.take(costs.F, order, axis=1))
     fit, final = fits(p, pose, costs, sub)
     placed = alternate(fit, pose.sim, pose.rotate)
     if opts.rotation == "auto" and pose.common:
@@ -272,31 +279,48 @@ def _match_cloud(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
 
 def _cloud_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> np.ndarray:
     """Where each source node of a 3D point set lands on the target (the target's
-    normalised frame), (m, 3): the modal matcher (above ``LARGE`` nodes on one coarse node per
-    ``NODES_PER_COARSE_CLOUD``, from ``COARSE`` to ``COARSE_CLOUD``), then
-    :func:`modalmorph.matching.clouds.refine`, from a resolution ``REFINE_FROM`` times
-    coarser than the modal matcher's."""
+    normalised frame), (m, 3): :func:`_coarse_landing`, then
+    :func:`modalmorph.matching.clouds.refine`, from ``REFINE_COARSER`` times coarser."""
+    landed, start = _coarse_landing(src, tgt, n_modes, opts)
+    return refine(src.normalized, tgt.to_normalized(landed), tgt.normalized,
+                  start // REFINE_COARSER)
+
+
+def _coarse_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
+                    ) -> tuple[np.ndarray, int]:
+    """Where the modal matcher takes each source node of a 3D point set (the target's
+    user coordinates), (m, 3), above ``LARGE`` nodes on one coarse node per
+    ``NODES_PER_COARSE_CLOUD`` (from ``COARSE`` to ``COARSE_CLOUD``); and the ``start``
+    of :func:`~modalmorph.matching.clouds.refine` for that resolution."""
     m = max(src.m, tgt.m)
     coarse = min(max(m // NODES_PER_COARSE_CLOUD, COARSE), COARSE_CLOUD)
     if m > LARGE:
         *_, landed = _match_large(src, tgt, n_modes, opts, coarse)
     else:
         *_, landed = _match_auto(src, tgt, n_modes, opts)
-    start = min(src.m, coarse) // REFINE_FROM
-    return refine(src.normalized, tgt.to_normalized(landed), tgt.normalized, start)
+    return landed, min(src.m, coarse) // 4
 
 
 def _huge_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> np.ndarray:
     """Where each source node lands (the target's normalised frame), (m, 3), for sets above
-    ``FINE_CLOUD`` nodes: :func:`_cloud_landing` of even subsets of both (the same
-    fraction of each, the larger ``FINE_CLOUD`` nodes), and every source node carried by
-    the similarity of the subset's landings (Horn) plus the rest of the move of its
-    ``CARRY`` nearest subset nodes (inverse-distance weights)."""
+    ``FINE_CLOUD`` nodes, matched on even subsets of both (the same fraction of each, the
+    larger ``FINE_CLOUD`` nodes): the subset's :func:`_coarse_landing`; ``POSE_PASSES``
+    times, the first level of :func:`~modalmorph.matching.clouds.refine` from the best
+    similarity of the landings so far (the pose, without the deformation that came with
+    it); every level of ``refine``; and every source node carried by the similarity of
+    the subset's landings (Horn) plus the rest of the move of its ``CARRY`` nearest
+    subset nodes (inverse-distance weights)."""
     keep = FINE_CLOUD / max(src.m, tgt.m)
     x = src.points[even_subset(src.normalized, int(keep * src.m))]
+    sub_s = Shape(x, ordered=False)
     sub_t = Shape(tgt.points[even_subset(tgt.normalized, int(keep * tgt.m))], ordered=False)
+    landed, start = _coarse_landing(sub_s, sub_t, n_modes, opts)
+    landed = sub_t.to_normalized(landed)
+    for _ in range(POSE_PASSES):
+        posed = sub_t.to_normalized(align(x, sub_t.to_user(landed)).apply(x))
+        landed = refine(sub_s.normalized, posed, sub_t.normalized, start, levels=1)
     landed = tgt.to_normalized(sub_t.to_user(
-        _cloud_landing(Shape(x, ordered=False), sub_t, n_modes, opts)))
+        refine(sub_s.normalized, landed, sub_t.normalized, start)))
     sim = align(x, landed)
     return sim.apply(src.points) + _carried(x, landed - sim.apply(x), src.points, src.size)
 
@@ -359,13 +383,7 @@ def _shapes(source, target) -> tuple[Shape, Shape]:
     src, tgt = as_shape(source, "source"), as_shape(target, "target")
     for name, shape in (("source", src), ("target", tgt)):
         if shape.dim == 2 and shape.ordered:
-            check_contours(shape, name)
-        if shape.dim == 2 and shape.ordered and shape.closed and min(
-                abs(area(shape.normalized[r])) for r in shape.slices) < FLAT_AREA:
-            raise ShapeError(f"{name} is a closed contour with no area (its nodes lie on "
-                             "one line): a closed contour must enclose an area; for an open "
-                             "curve pass Shape(points, closed=False), or in a file "
-                             "JSON {\"closed\": false} or an NPZ 'closed' array")
+            check_contours(shape, name)  # simple, and closed ones with an area
     if src.dim != tgt.dim:
         raise ShapeError(f"source and target must have the same dimension, got "
                          f"{src.dim}D and {tgt.dim}D")

@@ -46,7 +46,7 @@ class Fit:
 @dataclass(frozen=True, eq=False)
 class Placement:
     """A similarity and where it, with a deformation, takes every source node (m, d);
-    ``found``, when already run, the final search there (pairs and cost matrix,
+    ``found``, when already run, the final search there (pairs and their costs,
     :func:`~modalmorph.matching.search.pairs_at` on every node)."""
 
     sim: Similarity

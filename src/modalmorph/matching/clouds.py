@@ -21,6 +21,8 @@ nearest neighbours (beyond the best similarity). Memory is linear in the node co
 
 from __future__ import annotations
 
+from itertools import count
+
 import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
 from scipy.spatial import cKDTree
@@ -188,7 +190,8 @@ def _transport(z: np.ndarray, mu: np.ndarray, y: np.ndarray, nu: np.ndarray,
     return (plan @ y) / np.maximum(row, 1e-300)[:, None], np.minimum(row / mu, 1.0)
 
 
-def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndarray:
+def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
+           levels: int | None = None) -> np.ndarray:
     """Where the source lands on the target, refined coarse to fine.
 
     The first level summarises the target in cubes of about ``4 * start`` node counts'
@@ -211,6 +214,9 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndarra
         The target nodes, normalised.
     start : int
         Source nodes of the coarse match (its resolution).
+    levels : int, optional
+        Stop after this many levels of cubes, coarsest first, and return the landings as
+        they are then (no average); default: every level, the nodes last.
 
     Returns
     -------
@@ -221,7 +227,7 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndarra
     spacing = cKDTree(y).query(y, k=2)[0][:, 1].mean()
     width = spacing * np.sqrt(n / max(start, 1))  # a source of under 4 nodes: start 0
     wx, wy = _area(x), _area(y) * (m / n)  # the masses: the area each node stands for
-    while True:
+    for level in count(1):
         width = max(width / _STEP, spacing)
         if width == spacing:
             label, xc, mu, yc, nu = np.arange(m), x, wx, y, wy
@@ -240,6 +246,8 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndarra
             z = z + _OVERRELAX * smooth(zt - zc, share)
         if width == spacing:
             return _average(x, z)
+        if level == levels:
+            return z
 
 
 def _area(p: np.ndarray) -> np.ndarray:

@@ -57,6 +57,14 @@ def _nystrom(z0: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
     return kernel(z0, z0[landmarks]) @ (V[:, keep] / np.sqrt(s[keep]))
 
 
+def _band_sq_dist(z: np.ndarray, yb: np.ndarray) -> np.ndarray:
+    """``np.sum((z[:, None, :] - yb) ** 2, axis=2)`` (k, b), bit for bit; 2D compiled."""
+    if z.shape[1] != 2:
+        return np.sum((z[:, None, :] - yb) ** 2, axis=2)
+    from ._dp import band_sq_dist
+    return band_sq_dist(np.ascontiguousarray(z), yb)
+
+
 def drift(fit: Fit, placed: Placement, pairs: np.ndarray) -> np.ndarray:
     """Coherent point drift (Myronenko & Song 2010) restricted to the band of each node's
     partner in ``pairs`` (the final search at ``placed.z``): the source nodes ``fit.sub``
@@ -78,18 +86,18 @@ def drift(fit: Fit, placed: Placement, pairs: np.ndarray) -> np.ndarray:
     # CPD's start: the mean squared distance between every source and target node
     sigma2 = (np.sum(zs**2) / len(zs) + np.sum(y**2) / len(y) - 2 * zs.mean(0) @ y.mean(0)) / d
     a = np.zeros((f.shape[1], d))
-    D = np.sum((zs[:, None, :] - yb) ** 2, axis=2)
+    D = _band_sq_dist(zs, yb)
+    eye = np.eye(f.shape[1])
+    from ._dp import shared_weights  # compiled, numpy's operations in its order
     for _ in range(_COHERENT_ROUNDS):
         # E-step: each target node shares one unit of weight among the bands that hold it
-        K = np.where(valid, np.exp(-D / (2 * sigma2)), 0.0)
-        share = np.bincount(band[valid], K[valid], minlength=len(y))
-        P = K / np.maximum(share[band], np.finfo(float).tiny)
+        P = shared_weights(np.exp(-D / (2 * sigma2)), valid, band, len(y))
         p1 = P.sum(axis=1)
         # M-step: the field's coefficients (CPD's W, in the Nystrom features)
         target = np.einsum("kb,kbd->kd", P, yb) - p1[:, None] * zs
-        a = np.linalg.solve(f.T @ (p1[:, None] * f) + _COHERENT_LAMBDA * sigma2
-                            * np.eye(f.shape[1]), f.T @ target)
-        D = np.sum((zs[:, None, :] + (f @ a)[:, None, :] - yb) ** 2, axis=2)
+        a = np.linalg.solve(f.T @ (p1[:, None] * f) + _COHERENT_LAMBDA * sigma2 * eye,
+                            f.T @ target)
+        D = _band_sq_dist(zs + f @ a, yb)
         sigma2 = max(float(np.sum(P * D) / (p1.sum() * d)), floor)
     return z0 + f_all @ a
 

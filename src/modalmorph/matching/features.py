@@ -108,8 +108,9 @@ def fix_signs(phi1: np.ndarray, phi2: np.ndarray) -> np.ndarray:
 
 def sq_dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Squared distances (m, n) between the rows of ``a`` (m, p) and ``b`` (n, p)."""
-    return np.maximum(np.sum(a**2, axis=1)[:, None] + np.sum(b**2, axis=1)[None, :]
-                      - 2 * a @ b.T, 0.0)
+    out = np.sum(a**2, axis=1)[:, None] + np.sum(b**2, axis=1)[None, :]
+    out -= 2 * a @ b.T  # in place: fewer fresh (m, n) arrays, the same operations
+    return np.maximum(out, 0.0, out=out)
 
 
 def affinity(phi1: np.ndarray, phi2: np.ndarray) -> np.ndarray:
@@ -168,5 +169,7 @@ def prepare(src: Shape, tgt: Shape, n_modes: int, sigma: float | None,
     phi1, w1 = modal_features(src, n_modes, sigma=sigma)
     phi2, _ = modal_features(tgt, n_modes, sigma=sigma)
     sig1, sig2 = signature(phi1, _SIG_WIDTH), signature(phi2, _SIG_WIDTH)
-    F = _SIG_WEIGHT * sq_dist(sig1, sig2) / sig1.shape[1]
+    F = sq_dist(sig1, sig2)
+    F *= _SIG_WEIGHT  # _SIG_WEIGHT * sq_dist / width, in place
+    F /= sig1.shape[1]
     return Problem(src, tgt, phi1, w1, F, rotation)

@@ -25,7 +25,6 @@ from .search import (
     REPEAT,
     SKIP,
     Costs,
-    cyclic,
     monotone_totals,
     ordered_pairs,
     trusted_pairs,
@@ -156,7 +155,7 @@ def _pose_search(C: np.ndarray, candidates: np.ndarray, closed: bool, skip: floa
             break
         r = ranked[start:start + _POSE_BATCH]
         Cb = np.concatenate([C[r], C[r][:, :, ::-1]])  # forward, reversed target order
-        total = monotone_totals(cyclic(Cb, closed), skip, repeat)
+        total = monotone_totals(Cb, skip, repeat, closed)
         k = int(np.argmin(total))
         if total[k] < best_total:
             best_total, best = float(total[k]), (Cb[k], k >= len(r), r[k % len(r)])
@@ -173,14 +172,14 @@ def _coarse_costs(p: Problem):
     hc2 = p.tgt.spacing**2 * (p.tgt.m / len(cj)) ** 2
     rots, near, cos = _pose_candidates(p.src.dim, x, y, p.rotation)
     xc, yc = x[ci], y[cj]
-    if p.src.dim == 2:  # einsum's two products, added in its order: bitwise equal, 3-12x faster
-        z = rots[:, None, :, 0] * xc[None, :, None, 0] + rots[:, None, :, 1] * xc[None, :, None, 1]
-        zy = z[:, :, None, 0] * yc[None, None, :, 0] + z[:, :, None, 1] * yc[None, None, :, 1]
-    else:
-        z = np.einsum("rab,ib->ria", rots, xc)
-        zy = np.einsum("ria,ja->rij", z, yc)
-    D = (np.sum(z**2, -1)[:, :, None] + np.sum(yc**2, -1)[None, None, :] - 2 * zy) / hc2
     evidence = cos < np.cos(np.radians(_TURN_EVIDENCE))
+    if p.src.dim == 2:  # compiled, einsum's products added in its order: bitwise equal
+        from ._dp import pose_costs
+        D = pose_costs(rots, xc, yc, float(hc2), p.F[np.ix_(ci, cj)])
+        return D, ci, cj, near, evidence
+    z = np.einsum("rab,ib->ria", rots, xc)
+    zy = np.einsum("ria,ja->rij", z, yc)
+    D = (np.sum(z**2, -1)[:, :, None] + np.sum(yc**2, -1)[None, None, :] - 2 * zy) / hc2
     return D + p.F[np.ix_(ci, cj)], ci, cj, near, evidence
 
 

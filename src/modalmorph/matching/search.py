@@ -19,7 +19,7 @@ from scipy.optimize import linear_sum_assignment
 
 from .features import sq_dist
 
-__all__ = ["SKIP", "REPEAT", "mutual_best", "plausible", "monotone_totals", "cyclic",
+__all__ = ["SKIP", "REPEAT", "mutual_best", "plausible", "monotone_totals",
            "ordered_pairs", "Costs", "pairs_at", "trusted_pairs", "total", "objective",
            "final_pairs"]
 
@@ -27,10 +27,6 @@ __all__ = ["SKIP", "REPEAT", "mutual_best", "plausible", "monotone_totals", "cyc
 SKIP = 16.0  # leaving a source node unmatched (not measured)
 REPEAT = 4.0  # one target for two consecutive source nodes, a denser source (not measured)
 _TRUST = 4.0  # pairs costing at most this are trusted for the fits (not measured)
-# The search runs within each row's candidate columns when they span at most this share of
-# the cost matrix (heart pairs: 0.6 at 70 nodes, 0.4-0.5 at 250, 0.1-0.4 at 1000, where it
-# takes the match from 265 to 190 ms; with wider spans the extra slicing costs more).
-_SPAN_SHARE, _SPAN_MIN = 0.5, 256  # not below this many columns (70 nodes: 140, spans 0.6)
 
 
 def mutual_best(Z: np.ndarray) -> np.ndarray:
@@ -49,152 +45,38 @@ def plausible(cost: np.ndarray, factor: float) -> np.ndarray:
     return cost <= factor * max(float(np.median(cost)), 1e-12)
 
 
-def _forward(C: np.ndarray, skip: float, repeat: float, keep: bool):
-    """The dynamic programme of :func:`_monotone` over the rows of ``C`` (..., m, n).
-
-    Returns ``(F, T)``: ``F[i, ..., 1 + j]`` is the best cost of rows < i whose last
-    target is <= j (``F[i, ..., 0]``: every one of them skipped) and ``T[i, ..., j]`` the
-    best cost of rows <= i with row i matched to j. Within a row the best predecessor is a
-    running minimum (``np.fmin.accumulate``, for finite costs the same as ``minimum`` and
-    faster on 500-2000 columns): four vectorised O(n) operations per row
-    (six with ``repeat``), on views sliced once. With ``keep=False`` only two rows of
-    ``F`` are kept (the last is ``F[m % 2]``) and ``T`` is None.
-    """
-    *batch, m, n = C.shape
-    F = np.empty((m + 1 if keep else 2, *batch, n + 1))
-    T = np.empty((m if keep else 1, *batch, n))
-    F[0] = 0.0
-    if keep:  # every row skipped: skip * (i + 1)
-        F[1:, ..., 0] = (skip * np.arange(1, m + 1)).reshape(m, *[1] * len(batch))
-    repeats = np.isfinite(repeat)
-    prev = np.empty((*batch, n))
-    # per-row views made once (lists index faster than arrays make views)
-    rows = list(np.moveaxis(C, -2, 0))
-    heads, tails = list(F[..., :-1]), list(F[..., 1:])  # F[i, ..., j] and F[i, ..., 1 + j]
-    Ts, firsts = (list(T), None) if keep else ([T[0]] * m, list(F[..., :1]))
-    add, minimum, running_min = np.add, np.minimum, np.fmin.accumulate
-    for i in range(m):
-        a, b = (i, i + 1) if keep else (i % 2, 1 - i % 2)
-        Ti, Fn, Fa = Ts[i], tails[b], tails[a]
-        if repeats and i > 0:  # previous target < j, or == j at a price
-            add(Fa, repeat, out=prev)
-            minimum(prev, heads[a], out=prev)
-            add(rows[i], prev, out=Ti)
-        else:  # previous target < j
-            add(rows[i], heads[a], out=Ti)
-        running_min(Ti, axis=-1, out=Fn)
-        add(Fa, skip, out=prev)  # or row i skipped
-        minimum(Fn, prev, out=Fn)
-        if not keep:
-            firsts[b][...] = skip * (i + 1)
-    return F, (T if keep else None)
-
-
-def _candidate_span(C: np.ndarray, skip: float) -> tuple[np.ndarray, np.ndarray]:
-    """For every row of ``C`` (m, n) the first and last column whose cost is at most
-    ``skip`` (first > last where there is none). A pair costing more than ``skip`` is in
-    no optimal order-preserving matching (skipping its row instead is cheaper), and never
-    decides a running minimum of :func:`_rows_forward` either (with ``F`` non-increasing
-    along a row, it costs more than skipping the row does), so the search looks only
-    between these columns."""
-    mask = np.less_equal(C, skip)
-    n = C.shape[1]
-    first = np.where(mask.any(axis=1), mask.argmax(axis=1), n)
-    last = n - 1 - mask[:, ::-1].argmax(axis=1)
-    return first, last
-
-
-def _rows_forward(C: np.ndarray, skip: float, repeat: float, first, last):
-    """:func:`_forward` with ``keep`` for one problem (m, n), each row's work restricted to
-    its columns ``first[i]..last[i]`` (:func:`_candidate_span`); ``F`` is bitwise that of
-    :func:`_forward`, ``T`` only within those columns (elsewhere undefined). Before the
-    span a row's ``F`` is the row skipped, after it the smaller of that and the span's
-    minimum: a running minimum over the span alone (the slow part: 7 ns an element)."""
-    m, n = C.shape
-    F = np.empty((m + 1, n + 1))
-    T = np.empty((m, n))
-    F[0] = 0.0
-    F[1:, 0] = skip * np.arange(1, m + 1)
-    repeats = np.isfinite(repeat)
-    prev = np.empty(n)
-    add, minimum, running_min = np.add, np.minimum, np.fmin.accumulate
-    heads, tails = list(F[:, :-1]), list(F[:, 1:])  # F[i, j] and F[i, 1 + j]
-    for i, lo, hi in zip(range(m), first, last, strict=True):
-        hi += 1
-        Fa, Fn = tails[i], tails[i + 1]
-        add(Fa, skip, out=Fn)  # row i skipped
-        if lo >= hi:
-            continue
-        Ti, p = T[i, lo:hi], prev[lo:hi]
-        if repeats and i > 0:  # previous target < j, or == j at a price
-            add(Fa[lo:hi], repeat, out=p)
-            minimum(p, heads[i][lo:hi], out=p)
-            add(C[i, lo:hi], p, out=Ti)
-        else:  # previous target < j
-            add(C[i, lo:hi], heads[i][lo:hi], out=Ti)
-        running_min(Ti, out=p)
-        span, rest = Fn[lo:hi], Fn[hi:]
-        minimum(span, p, out=span)
-        minimum(rest, p[-1], out=rest)
-    return F, T
-
-
-def _monotone(C: np.ndarray, skip: float, repeat: float = np.inf
+def _monotone(C: np.ndarray, skip: float, repeat: float = np.inf, closed: bool = False
               ) -> tuple[np.ndarray, float]:
     """Order-preserving matching: ``j(i)`` non-decreasing in ``i``, each source node matched
     (cost ``C[i, j]``) or skipped (cost ``skip``), a target reused by consecutive source
     nodes at the extra cost ``repeat`` (``inf``: one-to-one); minimal total cost.
 
-    ``C`` has shape (m, n). Returns ``j`` (m,), -1 where the source node is unmatched, and
-    the total cost. The backtrack recomputes each decision on the one column it visits,
-    within the row's candidate columns (:func:`_candidate_span`).
+    ``C`` has shape (m, n); ``closed``: the target is closed and the search runs on it
+    doubled (2n columns, ``C``'s twice over), so that it may start anywhere. Returns
+    ``j`` (m,), -1 where the source node is unmatched, and the total cost. A dynamic
+    programme compiled with numba (:mod:`._dp`), each row's work within its columns
+    costing at most ``skip``.
     """
-    m, n = C.shape
-    first, last, spans = [0] * m, [n - 1] * m, False
-    if n >= _SPAN_MIN:
-        lo, hi = _candidate_span(C, skip)
-        spans = np.maximum(hi + 1 - lo, 0).sum() <= _SPAN_SHARE * m * n
-        if spans:
-            first, last = lo.tolist(), hi.tolist()
-    if spans:
-        F, T = _rows_forward(C, skip, repeat, first, last)
-    else:  # short or wide spans: whole rows, fewer operations a row
-        F, T = _forward(C, skip, repeat, keep=True)
-    j = np.full(m, -1, np.intp)
-    repeats = np.isfinite(repeat)
-    cur = n - 1
-    for i in range(m - 1, -1, -1):
-        if cur < 0:
-            break
-        lo, hi = first[i], last[i] if last[i] < cur else cur
-        if lo > hi:  # no candidate left of cur: row i skipped
-            continue
-        Ti, Fi = T[i], F[i]
-        left = Ti[hi::-1] if lo == 0 else Ti[hi:lo - 1:-1]
-        a = hi - int(left.argmin())  # last position of the minimum so far
-        if Ti[a] < Fi[cur + 1] + skip:  # row i matched (else skipped)
-            j[i] = a
-            again = repeats and i > 0 and Fi[a + 1] + repeat < Fi[a]
-            cur = a if again else a - 1
-    return j, float(F[m, -1])
+    from ._dp import ordered  # numba loads with the first search, not with the package
+    j, best = ordered(np.ascontiguousarray(C, dtype=np.float64),
+                      (float(skip), float(repeat), bool(closed)))
+    return j, float(best)
 
 
-def monotone_totals(C: np.ndarray, skip: float, repeat: float = np.inf) -> np.ndarray:
+def monotone_totals(C: np.ndarray, skip: float, repeat: float = np.inf,
+                    closed: bool = False) -> np.ndarray:
     """The least total cost of :func:`_monotone` for a batch of problems ``C`` (..., m, n),
     shape (...,), in memory of two rows."""
-    F, _ = _forward(C, skip, repeat, keep=False)
-    return F[C.shape[-2] % 2, ..., -1]
-
-
-def cyclic(C: np.ndarray, closed: bool) -> np.ndarray:
-    """A closed target doubled, so that an order-preserving search may start anywhere."""
-    return np.concatenate([C, C], axis=-1) if closed else C
+    from ._dp import totals
+    *batch, m, n = C.shape
+    flat = np.ascontiguousarray(C, dtype=np.float64).reshape(-1, m, n)
+    return totals(flat, (float(skip), float(repeat), bool(closed))).reshape(batch)
 
 
 def ordered_pairs(C: np.ndarray, closed: bool, skip: float, repeat: float):
     """Order-preserving pairs over a cost (m, n), cyclic for a closed target. Returns j
     (m,) and the total cost."""
-    j, best = _monotone(cyclic(C, closed), skip, repeat)
+    j, best = _monotone(C, skip, repeat, closed)
     return np.where(j >= 0, j % C.shape[-1], -1), best
 
 
@@ -228,14 +110,16 @@ def _untangle(t: np.ndarray, cost: np.ndarray, n: int, skip: float, strict: bool
         keep[end if loss_end <= loss_start else start] = False
 
 
-def _pairs_from_j(j: np.ndarray, cost: np.ndarray, one_to_one: bool) -> np.ndarray:
+def _pairs_from_j(j: np.ndarray, cost: np.ndarray, one_to_one: bool):
+    """The pairs ``(i, j[i])`` where ``j[i] >= 0`` and their costs, from the partner and
+    the pair's cost ``cost`` (m,) of every source node."""
     i = np.flatnonzero(j >= 0)
     pairs = np.stack([i, j[i]], axis=1)  # np.c_ costs 10 us more a call
     if one_to_one and len(pairs):  # a cyclic search may reuse a target once across the cut
-        order = np.argsort(cost[pairs[:, 0], pairs[:, 1]], kind="stable")
+        order = np.argsort(cost[i], kind="stable")
         _, first = np.unique(pairs[order, 1], return_index=True)
         pairs = pairs[np.sort(order[first])]
-    return pairs
+    return pairs, cost[pairs[:, 0]]
 
 
 @dataclass(frozen=True, eq=False)
@@ -256,36 +140,21 @@ class Costs:
     many: bool = False
 
 
-def _placed_costs(costs: Costs, x: np.ndarray, rows: np.ndarray):
-    """``sq_dist(x, y) / h2 + F[rows]`` (m, n), bitwise, written in place into the first
-    half of an (m, 2n) array whose second half repeats it for a closed target
-    (:func:`cyclic`): fewer passes over m x n arrays. Returns the cost and the array
-    searched (the same for an open target)."""
-    y, n = costs.y, len(costs.y)
-    out = np.empty((len(x), 2 * n if costs.closed else n))
-    C = out[:, :n]
-    np.add(np.sum(x**2, axis=1)[:, None], np.sum(y**2, axis=1)[None, :], out=C)
-    C -= 2 * x @ y.T  # as features.sq_dist
-    np.maximum(C, 0.0, out=C)
-    C /= costs.h2
-    C += costs.F if len(rows) == len(costs.F) else costs.F[rows]  # every node, in order
-    if costs.closed:
-        out[:, n:] = C
-    return C, out
-
-
 def pairs_at(costs: Costs, z: np.ndarray, rows: np.ndarray):
     """Pairs (row index, target index) for the source nodes ``rows`` (distinct, ascending)
-    placed at ``z``, and the cost matrix: order-preserving for contours, an assignment for
-    point sets."""
+    placed at ``z``, and their costs: order-preserving for contours (the cost of every
+    row made inside the compiled search, :func:`._dp.placed_search`, bitwise
+    ``sq_dist(z[rows], y) / h2 + F[rows]``), an assignment for point sets."""
+    x, y = z[rows], costs.y
     if costs.ordered:
-        C, doubled = _placed_costs(costs, z[rows], rows)
-        j, _ = _monotone(doubled, SKIP, costs.repeat)
-        j = np.where(j >= 0, j % C.shape[1], -1)
-        return _pairs_from_j(j, C, one_to_one=not costs.many), C
-    C = sq_dist(z[rows], costs.y) / costs.h2 + costs.F[rows]
+        from ._dp import placed_search
+        xx, yy = np.sum(x**2, axis=1), np.sum(y**2, axis=1)  # as features.sq_dist
+        j, cost = placed_search(xx, yy, 2 * x @ y.T, costs.F, np.asarray(rows, np.intp),
+                                float(costs.h2), (SKIP, float(costs.repeat), bool(costs.closed)))
+        return _pairs_from_j(j, cost, one_to_one=not costs.many)
+    C = sq_dist(x, y) / costs.h2 + costs.F[rows]
     r, c = linear_sum_assignment(C)
-    return np.c_[r, c], C
+    return np.c_[r, c], C[r, c]
 
 
 def _trusted(pairs: np.ndarray, cost: np.ndarray, d: int) -> np.ndarray:
@@ -298,17 +167,16 @@ def _trusted(pairs: np.ndarray, cost: np.ndarray, d: int) -> np.ndarray:
 def trusted_pairs(costs: Costs, z: np.ndarray, sub: np.ndarray):
     """Search the source nodes ``sub`` placed at ``z``: the trusted pairs (source index,
     target index) and the total cost of all pairs."""
-    pairs, C = pairs_at(costs, z, sub)
-    cost = C[pairs[:, 0], pairs[:, 1]]
+    pairs, cost = pairs_at(costs, z, sub)
     rows = np.stack([sub[pairs[:, 0]], pairs[:, 1]], axis=1)
     return _trusted(rows, cost, z.shape[1]), cost.sum()
 
 
 def total(found: tuple, m: int) -> float:
-    """The search's objective from its pairs and cost matrix ``found``: pair costs plus
+    """The search's objective from its pairs and their costs ``found``: pair costs plus
     ``SKIP`` for every one of the ``m`` source nodes left unmatched."""
-    pairs, C = found
-    return float(C[pairs[:, 0], pairs[:, 1]].sum() + SKIP * (m - len(pairs)))
+    pairs, cost = found
+    return float(cost.sum() + SKIP * (m - len(pairs)))
 
 
 def objective(costs: Costs, z: np.ndarray) -> float:
@@ -318,11 +186,10 @@ def objective(costs: Costs, z: np.ndarray) -> float:
 
 def final_pairs(final: Costs, z: np.ndarray, found: tuple, reject: float):
     """The pairs ``found`` by the search on every source node placed at ``z`` (pairs
-    and cost matrix), less those costing more than ``reject`` and, on a closed target,
+    and their costs), less those costing more than ``reject`` and, on a closed target,
     those that would go round it twice. Returns the pairs (target indices in search
     order) and their costs."""
-    pairs, C = found
-    cost = C[pairs[:, 0], pairs[:, 1]]
+    pairs, cost = found
     keep = cost <= reject
     if final.closed:  # partners round the target once: none crossing at the cut or a step back
         keep &= _untangle(pairs[:, 1], cost, len(final.y), SKIP, strict=not final.many)

@@ -18,6 +18,7 @@ from scipy.spatial import cKDTree
 
 from ..core.quality import Polyline
 from ..core.shape import Shape, even_subset, resample
+from ..core.surfaces import closest_on_faces
 from ..options import MorphOptions
 
 __all__ = ["COARSE_FLOOR", "ContourStop", "CurveStop", "LAZY_SPACINGS", "Limits", "PLANE",
@@ -170,16 +171,26 @@ class SurfaceStop(StopTest):
     target's distance to the shape's surface is measured less ``coarse``, what such a
     sample (:func:`even_subset`) leaves beyond ``floor``. A target so coarse that its
     ``floor`` exceeds ``COARSE_FLOOR`` tolerances hides any distance below it: the mean
-    distance of the pulled pairs, ``near``, then counts too (``pairs``). With ``lazy``
+    distance of the pulled pairs, ``near``, then counts too (``pairs``). Surfaces with
+    faces are their triangles: the shape's distance to a target with ``faces`` is to
+    them, exact, with no floor (the quadrics of a coarse target's vertices pass off its
+    faces: a sphere of 642 vertices said converged on an ellipsoid of 162 lay 2
+    tolerances off its faces, method.md §5); the target's vertices' to the shape, when
+    the source has ``source_faces`` and is not coarser than the target, is to the
+    shape's faces less ``floor`` (a smooth shape may round a coarse target's corners by
+    as much as they stand off a smooth surface through their neighbours). With ``lazy``
     the surfaces are measured only once ``near`` is within ``gate``, the tolerance plus
     ``LAZY_SPACINGS`` target spacings."""
 
     lazy = True
 
-    def __init__(self, limits: Limits, target: np.ndarray, *, m: int | None = None):
+    def __init__(self, limits: Limits, target: np.ndarray, *, m: int | None = None,
+                 faces: np.ndarray | None = None, source_faces: np.ndarray | None = None):
         super().__init__(limits)
         self.target = target
+        self.faces = faces
         self.tree = cKDTree(target)
+        self.face_tree = None if faces is None else cKDTree(target[faces].mean(axis=1))
         self.floor = float(to_surface(target, target, self.tree, skip=1).mean())
         spacing = self.tree.query(target, k=2)[0][:, 1].mean()
         self.gate = limits.tolerance + LAZY_SPACINGS * spacing
@@ -188,15 +199,26 @@ class SurfaceStop(StopTest):
             sample = target[even_subset(target, m)]
             left = float(to_surface(target, sample, cKDTree(sample)).mean())
             self.coarse = max(left - self.floor, 0.0)
-        self.pairs = self.floor > COARSE_FLOOR * limits.tolerance  # too coarse alone
+        self.source_faces = source_faces if m is not None and m >= len(target) else None
+        quadrics = faces is None or self.source_faces is None  # whose floor hides
+        self.pairs = quadrics and self.floor > COARSE_FLOOR * limits.tolerance
 
     def distance(self, current: np.ndarray, near: float, lazy: bool = True) -> float:
         if lazy and near > self.gate:
             return near
         Y = self.target
-        d_ab = to_surface(current, Y, self.tree).mean()
-        d_ba = to_surface(Y, current, cKDTree(current)).mean()
-        surface = max(float(d_ab), float(d_ba) - self.coarse, self.floor) - self.floor
+        if self.faces is None:
+            d_ab = float(to_surface(current, Y, self.tree).mean()) - self.floor
+        else:
+            on = closest_on_faces(current, Y, self.faces, self.face_tree)
+            d_ab = float(np.linalg.norm(current - on, axis=1).mean())
+        if self.source_faces is None:
+            d_ba = max(float(to_surface(Y, current, cKDTree(current)).mean()) - self.coarse,
+                       self.floor) - self.floor
+        else:
+            d_ba = float(np.linalg.norm(Y - closest_on_faces(Y, current, self.source_faces),
+                                        axis=1).mean()) - self.floor
+        surface = max(d_ab, d_ba, 0.0)
         return max(surface, near) if self.pairs else surface
 
 
@@ -211,8 +233,14 @@ def choose_stop_test(source: Shape, target: Shape, target_n: np.ndarray,
         return CurveStop(limits, target_n, closed=source.closed,
                          target_closed=target.closed, m=source.m)
     if source.dim == 3 and min(source.m, target.m) > PLANE:
-        return SurfaceStop(limits, target_n, m=source.m)
+        return SurfaceStop(limits, target_n, m=source.m, faces=_faces(target),
+                           source_faces=_faces(source))
     return PairStop(limits)
+
+
+def _faces(shape: Shape) -> np.ndarray | None:
+    """A surface's triangles; None for a point set."""
+    return shape.faces if shape.faces is not None and len(shape.faces) else None
 
 
 def to_surface(points: np.ndarray, cloud: np.ndarray, tree: cKDTree,
