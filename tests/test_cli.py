@@ -444,5 +444,5 @@ def test_points_on_a_line_are_refused_by_file_name_not_resampled(tmp_path, capsy
     assert main(["morph", str(tmp_path / "line.csv"), str(tmp_path / "circle.csv"),
                  "-o", str(tmp_path / "out")]) == 2
     err = [x for x in capsys.readouterr().err.strip().splitlines() if "error" in x]
-    assert len(err) == 1 and "line.csv is a closed contour with no area" in err[0], err
+    assert len(err) == 1 and "line.csv: a closed contour with no area" in err[0], err
     assert not (tmp_path / "out").exists()

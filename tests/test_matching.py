@@ -410,7 +410,7 @@ def test_bad_input(hand90):
     with pytest.raises(ValueError, match="reject must be"):
         match(hand90, hand90, reject=0.0)
     line = np.c_[np.arange(10.0), 2 * np.arange(10.0)]
-    with pytest.raises(ValueError, match="source is a closed contour with no area"):
+    with pytest.raises(ValueError, match="source: a closed contour with no area"):
         match(line, hand90)
     match(Shape(line, closed=False), Shape(hand90[:40], closed=False))  # open: fine
 

@@ -73,6 +73,19 @@ def test_coarse_mesh_onto_a_finer_one_converges():
         assert not np.any(r.self_intersections)
 
 
+def test_coarse_sphere_onto_a_stretched_ellipsoid_converges():
+    """An icosphere of 162 vertices onto an ellipsoid of 642 stretched x2 (radii 2, 1,
+    0.5): the source reaches the tips (when the transport dropped every edge beyond its
+    reach, the tips were read as a part the source lacks: 37 times the tolerance away)."""
+    from scipy.spatial.transform import Rotation
+
+    a, fa = icosphere(2)
+    b, fb = icosphere(3)
+    turn = Rotation.from_rotvec([0.3, -0.5, 0.4])
+    r = mm.morph(mm.Shape(a, faces=fa), mm.Shape(turn.apply(b * [2.0, 1.0, 0.5]), faces=fb))
+    assert r.converged, r.message  # measured 5 steps
+
+
 def test_surface_stop_knows_the_source_resolution():
     """A source at least as fine as the target adds nothing (the measure is as before);
     a coarser one is allowed what ``m`` points spread over the target leave."""

@@ -17,7 +17,7 @@ from .shape import resample
 
 __all__ = ["Polyline", "area", "check_contours", "correspondence_rotation",
            "curve_distances", "roughness", "self_crossings", "crossing_segments", "LOOP_AREA",
-           "check_simple", "check_area", "FLAT_AREA"]
+           "check_simple", "check_flat", "FLAT"]
 
 # Vertices whose segments curve_distances tests first (4: 2.5x faster than 8; method.md §5).
 _K_NEAREST = 4
@@ -234,19 +234,19 @@ def crossing_segments(points, closed: bool = True, *, edges=None) -> np.ndarray:
 
 # Loops above this x size^2 make a contour not simple (hands' noise < 4e-5; method.md §5).
 LOOP_AREA = 1e-3
-# A closed contour enclosing at most this x its RMS radius^2 lies on one line (rounding of
-# a straight line's nodes: ~1e-16; the thinnest glyph outline of 15 thin characters in six
-# fonts, cmr10's "|": 0.10).
-FLAT_AREA = 5e-10
+# Nodes whose spread across their principal line is at most this x their spread along it
+# lie on one line (rounding of a straight line's nodes: ~1e-14; the thinnest glyph outline
+# of 15 thin characters in six fonts, cmr10's bar: 0.026).
+FLAT = 1e-9
 
 
-def check_area(points, name: str) -> None:
-    """Refuse a closed 2D contour with no area (its nodes on one line): it has no inside,
-    and resampled it doubles back over itself."""
+def check_flat(points, name: str) -> None:
+    """Refuse a closed 2D contour whose nodes lie on one line: it encloses no area, and
+    resampled it doubles back over itself."""
     p = np.asarray(points, dtype=np.float64)
-    centred = p - p.mean(axis=0)
-    if abs(area(centred)) < FLAT_AREA * np.mean(np.sum(centred ** 2, axis=1)):
-        raise ShapeError(f"{name} is a closed contour with no area (its nodes lie on one "
+    spread = np.linalg.svd(p - p.mean(axis=0), compute_uv=False)
+    if not spread[-1] > FLAT * spread[0]:
+        raise ShapeError(f"{name}: a closed contour with no area (its nodes lie on one "
                          "line): a closed contour must enclose an area; for an open curve "
                          "pass Shape(points, closed=False), or in a file JSON "
                          "{\"closed\": false} or an NPZ 'closed' array")
@@ -255,7 +255,7 @@ def check_area(points, name: str) -> None:
 def check_simple(points, name: str, closed: bool = True) -> None:
     """Refuse a 2D contour that crosses itself beyond tiny loops (a figure eight, a star):
     :class:`~modalmorph.errors.ShapeError` names the first two crossing segments and
-    where they cross; and a closed one with no area (:func:`check_area`). Loops enclosing
+    where they cross; and a closed one with no area (:func:`check_flat`). Loops enclosing
     at most :data:`LOOP_AREA` times the squared RMS radius (the tracing noise of real
     outlines) are accepted."""
     p = _points(points, name, dims=(2,))
@@ -274,8 +274,8 @@ def check_simple(points, name: str, closed: bool = True) -> None:
                 f"{name} crosses itself: the segment from node {i} to {(i + 1) % m} crosses "
                 f"the one from node {j} to {(j + 1) % m} at ({x[0]:.4g}, {x[1]:.4g}); a "
                 "contour must be one simple closed curve (a figure eight or a star is not)")
-    if closed:  # after the crossings: a figure eight's lobes cancel in the signed area
-        check_area(p, name)
+    if closed:
+        check_flat(p, name)
 
 
 def check_contours(shape, name: str) -> None:

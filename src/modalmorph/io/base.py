@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.quality import check_simple
+from ..core.quality import check_flat
 from ..core.shape import ImageFrame, Shape, resample, share
-from ..errors import InputFileError
+from ..errors import InputFileError, ShapeError
 from ..options import ReadOptions
 
 __all__ = ["DEFAULT_NODES", "FLIPPED_FRAME", "RawShape", "Reader", "UNEVEN_SPACING",
@@ -133,8 +133,11 @@ def make_shape(name, pts, *, faces=None, nodes=None, closed=True, frame=None,
                              f"{pts.shape[1]}D "
                              f"{'surface' if faces is not None else 'point set'}")
     if nodes is not None and closed and sum(contours or (len(pts),)) == len(pts):
-        for part in np.split(pts, np.cumsum(contours or (len(pts),))[:-1]):
-            check_simple(part, name)  # resampled, a flat one would double back on itself
+        try:  # resampled, a contour on one line would double back over itself
+            for part in np.split(pts, np.cumsum(contours or (len(pts),))[:-1]):
+                check_flat(part, name)
+        except ShapeError as exc:
+            raise InputFileError(str(exc)) from None
     try:
         if nodes is not None:
             pts, contours = _resampled(pts, int(nodes), bool(closed), contours)

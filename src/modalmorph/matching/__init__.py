@@ -57,7 +57,7 @@ from ..core.shape import Shape, as_shape, check_pairs, even_subset, spread_indic
 from ..errors import OptionError, ShapeError
 from ..options import METHODS, ROTATIONS, MatchOptions
 from ..threads import blas_threads, limit
-from .alternation import alternate, fits, keep_or_turn
+from .alternation import Placement, alternate, fits, keep_or_turn
 from .clouds import refine
 from .coherent import settle
 from .contours import keep_partners, match_contours
@@ -69,7 +69,7 @@ from .features import (
     modal_features,
     prepare,
 )
-from .pose import cloud_pose, contour_pose
+from .pose import cloud_pose, contour_pose, surface_gap
 from .search import Costs, final_pairs, mutual_best, plausible
 
 __all__ = ["Matching", "match", "modal_features", "affinity", "DEFAULT_MODES",
@@ -88,8 +88,26 @@ FINE_CLOUD = 100_000
 # Coarse or subset nodes whose moves carry a node (inverse-distance weights): the nodes so
 # carried land as well as the subset's own (1M blob: 3.79 and 3.82 spacings).
 CARRY = 4
+# Passes of refine's first level, each from the best similarity of the landings before it,
+# on the subsets of a set above FINE_CLOUD (the pose the coarse match gives is 2 deg off and
+# refine alone halves that). 1 000 000 points, 30 deg, median pair error in target
+# spacings: blob 0 / 1 / 2 / 3 passes 4.30 / 3.22 / 2.75 / 2.71 (19.0 / 21.5 / 22.8 / 27.4
+# CPU-s); bunny 1.84 -> 1.74 (0 deg 1.73 -> 1.71, 90 deg 1.70 -> 1.39).
+POSE_PASSES = 2
+# refine() of a 3D point set up to FINE_CLOUD nodes starts this many times coarser than
+# the start _coarse_landing gives (16 times coarser than the modal matcher's nodes instead
+# of 4; benchmarks/match3d.py, median in target spacings, 1 -> 4: torus cut 1000 at 30
+# deg modulo its symmetry 0.51 -> 0.31, blob cut 10 000 at 30/180 deg 0.76/1.18 ->
+# 0.92/1.00, bone warp25 1000 at 90 deg 0.54 -> 0.61, bunny cut 10 000 within 0.01; with
+# the reach of clouds.py dropping every long edge, 30 cases at 1000 and 12 at 10 000
+# within 0.05 but those; blob 100 000 at 30 deg 0.89 -> 0.87, 14.0 -> 14.9 CPU-s).
+REFINE_COARSER = 4
 ALTERNATION_NODES = 400  # nodes in the alternation (at 1000: 0.52 -> 0.27 s, same precision)
 MAX_AFFINITY = 4e7  # largest m x n affinity the paper's searches build (memory; not measured)
+# Surface gaps compared up to this many target spacings (the pose search's _TRIM).
+# 500 points, pose vs alternation (1000 twisted: the alternation kept): cow uneven and cut
+# at 30 deg, after refine 4.38 -> 0.95, 1.74 -> 0.24 spacings; blob uneven 180 deg 3.06 -> 2.09.
+_GAP_TRIM = 2.0
 _REJECT = 16.0  # pairs costing more are dropped: 4 target spacings (not measured)
 
 
@@ -191,11 +209,26 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
     placed = alternate(fit, pose.sim, pose.rotate)
     if opts.rotation == "auto" and pose.common:
         placed = keep_or_turn(fit, final, placed, pose.turned)
+    if src.dim == 3 and not p.ordered:
+        placed = _nearer_surface(placed, pose.sim, costs, tgt.spacing)
     z, found = settle(fit, final, placed, p.ordered)
     pairs, cost = final_pairs(final, z, found, _REJECT if opts.reject is None else opts.reject)
     pairs = np.c_[pairs[:, 0], order[pairs[:, 1]]]
     landed = tgt.to_user(z)
     return pairs, cost, align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]]), landed
+
+
+def _nearer_surface(placed: Placement, sim: Similarity, costs: Costs, spacing: float
+                    ) -> Placement:
+    """The alternation's placement of a 3D point set, or the pose ``sim`` alone when
+    that lies nearer the target's surface (:func:`~modalmorph.matching.pose.surface_gap`,
+    distances capped at ``_GAP_TRIM`` target spacings): the alternation's one-to-one
+    assignments drag the source towards where a target sampled unevenly is dense, or
+    over a part that the target lacks."""
+    trim, posed = _GAP_TRIM * spacing, sim.apply(costs.x)
+    if surface_gap(posed, costs.y, trim) < surface_gap(placed.z, costs.y, trim):
+        return Placement(sim, posed)
+    return placed
 
 
 def _match_large(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions,
@@ -246,30 +279,48 @@ def _match_cloud(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
 
 def _cloud_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> np.ndarray:
     """Where each source node of a 3D point set lands on the target (the target's
-    normalised frame), (m, 3): the modal matcher (above ``LARGE`` nodes on one coarse node per
-    ``NODES_PER_COARSE_CLOUD``, from ``COARSE`` to ``COARSE_CLOUD``), then
-    :func:`modalmorph.matching.clouds.refine`."""
+    normalised frame), (m, 3): :func:`_coarse_landing`, then
+    :func:`modalmorph.matching.clouds.refine`, from ``REFINE_COARSER`` times coarser."""
+    landed, start = _coarse_landing(src, tgt, n_modes, opts)
+    return refine(src.normalized, tgt.to_normalized(landed), tgt.normalized,
+                  start // REFINE_COARSER)
+
+
+def _coarse_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
+                    ) -> tuple[np.ndarray, int]:
+    """Where the modal matcher takes each source node of a 3D point set (the target's
+    user coordinates), (m, 3), above ``LARGE`` nodes on one coarse node per
+    ``NODES_PER_COARSE_CLOUD`` (from ``COARSE`` to ``COARSE_CLOUD``); and the ``start``
+    of :func:`~modalmorph.matching.clouds.refine` for that resolution."""
     m = max(src.m, tgt.m)
     coarse = min(max(m // NODES_PER_COARSE_CLOUD, COARSE), COARSE_CLOUD)
     if m > LARGE:
         *_, landed = _match_large(src, tgt, n_modes, opts, coarse)
     else:
         *_, landed = _match_auto(src, tgt, n_modes, opts)
-    start = min(src.m, coarse) // 4
-    return refine(src.normalized, tgt.to_normalized(landed), tgt.normalized, start)
+    return landed, min(src.m, coarse) // 4
 
 
 def _huge_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> np.ndarray:
     """Where each source node lands (the target's normalised frame), (m, 3), for sets above
-    ``FINE_CLOUD`` nodes: :func:`_cloud_landing` of even subsets of both (the same
-    fraction of each, the larger ``FINE_CLOUD`` nodes), and every source node carried by
-    the similarity of the subset's landings (Horn) plus the rest of the move of its
-    ``CARRY`` nearest subset nodes (inverse-distance weights)."""
+    ``FINE_CLOUD`` nodes, matched on even subsets of both (the same fraction of each, the
+    larger ``FINE_CLOUD`` nodes): the subset's :func:`_coarse_landing`; ``POSE_PASSES``
+    times, the first level of :func:`~modalmorph.matching.clouds.refine` from the best
+    similarity of the landings so far (the pose, without the deformation that came with
+    it); every level of ``refine``; and every source node carried by the similarity of
+    the subset's landings (Horn) plus the rest of the move of its ``CARRY`` nearest
+    subset nodes (inverse-distance weights)."""
     keep = FINE_CLOUD / max(src.m, tgt.m)
     x = src.points[even_subset(src.normalized, int(keep * src.m))]
+    sub_s = Shape(x, ordered=False)
     sub_t = Shape(tgt.points[even_subset(tgt.normalized, int(keep * tgt.m))], ordered=False)
+    landed, start = _coarse_landing(sub_s, sub_t, n_modes, opts)
+    landed = sub_t.to_normalized(landed)
+    for _ in range(POSE_PASSES):
+        posed = sub_t.to_normalized(align(x, sub_t.to_user(landed)).apply(x))
+        landed = refine(sub_s.normalized, posed, sub_t.normalized, start, levels=1)
     landed = tgt.to_normalized(sub_t.to_user(
-        _cloud_landing(Shape(x, ordered=False), sub_t, n_modes, opts)))
+        refine(sub_s.normalized, landed, sub_t.normalized, start)))
     sim = align(x, landed)
     return sim.apply(src.points) + _carried(x, landed - sim.apply(x), src.points, src.size)
 

@@ -21,6 +21,8 @@ nearest neighbours (beyond the best similarity). Memory is linear in the node co
 
 from __future__ import annotations
 
+from itertools import count
+
 import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
 from scipy.spatial import cKDTree
@@ -57,6 +59,17 @@ _TEMPERATURE = 0.5  # width of the transport's Gaussian, x the level's cube widt
 # within 0.02 spacings but the torus cut at 90 deg modulo its symmetry (1.29 -> 1.45),
 # 100 000 points unchanged (blob 0.87, bunny 0.83), 1 000 000: blob 4.06 -> 4.27.
 _RELAX = 0.955
+# A source point whose nearest target point lies farther than this x the temperature goes
+# nowhere (share 0) and is carried by its neighbours' moves, so a part that the target
+# lacks is not dragged onto the nearest of what is there; target points keep pulling
+# whatever is near them. benchmarks/match3d.py, median (p90) in target spacings, none ->
+# 2: blob cut 10 000 at 30/180 deg 4.35/2.12 (16.7/6.7) -> 0.92/1.00 (5.7/6.2), bunny cut
+# 10 000 0.88/0.91 (13.6/9.0) -> 0.61/0.67 (1.0/1.2), 1000-point cuts' p90 1.7-2.6 ->
+# 0.5-1.5. Every edge beyond the reach dropped instead (targets too): blob cut 10 000 at
+# 30 deg 0.80 (4.7), but an icosphere of 162 nodes onto an ellipsoid stretched x2 (642,
+# benchmarks/morph3d.py --surfaces) no longer stretched to its tips (distance 37 x the
+# tolerance; 4 temperatures: 12 x).
+_REACH = 2.0
 _WIDTH = 8.0  # smoothing width, x the level's cube width
 _STEP = 2.0  # ratio of the cube widths of successive levels
 _AVERAGE = 32  # last landings averaged over this many nearest nodes (100k blob 1.14 -> 0.88)
@@ -142,10 +155,11 @@ def _transport(z: np.ndarray, mu: np.ndarray, y: np.ndarray, nu: np.ndarray,
     barycentre and the total of its row of an unbalanced entropic transport plan
     (Sinkhorn scaling with the marginals relaxed, ``_RELAX``) on the sparse graph of each
     side's nearest points on the other (or on ``graph``, :func:`_graph` of an earlier
-    round). Matching the masses makes the source cover the target evenly, which slides
-    it along the surface where nearest points alone would not; relaxing them lets a part
-    that one side lacks go unpaired, instead of pulling the rest of the other side over
-    to cover it."""
+    round), a source point with no target point within ``_REACH`` temperatures left
+    unpaired. Matching the masses makes
+    the source cover the target evenly, which slides it along the surface where nearest
+    points alone would not; relaxing them, and the reach, let a part that one side lacks
+    go unpaired, instead of pulling the rest of the other side over to cover it."""
     s, t = len(z), len(y)
     if graph is None:
         k = min(_NEIGHBOURS, s, t)
@@ -159,22 +173,25 @@ def _transport(z: np.ndarray, mu: np.ndarray, y: np.ndarray, nu: np.ndarray,
                        shape=(s, t))
         P = P.tocsr()
         P.sum_duplicates()
+        lone = d1[:, 0] > _REACH * temperature
     else:
         rows = np.repeat(np.arange(s), np.diff(graph.indptr))
         d2 = np.sum((z[rows] - y[graph.indices]) ** 2, axis=1)
         P = graph.copy()
         P.data = graph.data * np.exp(-0.5 * d2 / temperature**2)
+        lone = np.minimum.reduceat(d2, graph.indptr[:-1]) > (_REACH * temperature) ** 2
     P.data = np.maximum(P.data, 1e-300)
     a, b = np.ones(s), np.ones(t)
     for _ in range(_SINKHORN if max(s, t) <= _MANY_POINTS else _SINKHORN_MANY):
-        a = (mu / (P @ b)) ** _RELAX
-        b = (nu / (P.T @ a)) ** _RELAX
+        a = np.where(lone, 0.0, (mu / (P @ b)) ** _RELAX)
+        b = (nu / np.maximum(P.T @ a, 1e-300)) ** _RELAX
     plan = P.multiply(a[:, None]).multiply(b[None, :]).tocsr()
     row = np.asarray(plan.sum(axis=1)).ravel()
     return (plan @ y) / np.maximum(row, 1e-300)[:, None], np.minimum(row / mu, 1.0)
 
 
-def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndarray:
+def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
+           levels: int | None = None) -> np.ndarray:
     """Where the source lands on the target, refined coarse to fine.
 
     The first level summarises the target in cubes of about ``4 * start`` node counts'
@@ -197,6 +214,9 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndarra
         The target nodes, normalised.
     start : int
         Source nodes of the coarse match (its resolution).
+    levels : int, optional
+        Stop after this many levels of cubes, coarsest first, and return the landings as
+        they are then (no average); default: every level, the nodes last.
 
     Returns
     -------
@@ -207,7 +227,7 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndarra
     spacing = cKDTree(y).query(y, k=2)[0][:, 1].mean()
     width = spacing * np.sqrt(n / max(start, 1))  # a source of under 4 nodes: start 0
     wx, wy = _area(x), _area(y) * (m / n)  # the masses: the area each node stands for
-    while True:
+    for level in count(1):
         width = max(width / _STEP, spacing)
         if width == spacing:
             label, xc, mu, yc, nu = np.arange(m), x, wx, y, wy
@@ -226,6 +246,8 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndarra
             z = z + _OVERRELAX * smooth(zt - zc, share)
         if width == spacing:
             return _average(x, z)
+        if level == levels:
+            return z
 
 
 def _area(p: np.ndarray) -> np.ndarray:

@@ -30,7 +30,7 @@ from .search import (
     trusted_pairs,
 )
 
-__all__ = ["Pose", "contour_pose", "cloud_pose"]
+__all__ = ["Pose", "contour_pose", "cloud_pose", "surface_gap"]
 
 _COARSE_NODES = 64  # nodes of each contour in the pose search (not measured)
 _COARSE_NODES_CLOUD = 256  # the same for point sets, which have 4 poses only (not measured)
@@ -229,9 +229,14 @@ def _trimmed_icp(x: np.ndarray, y: np.ndarray, sim: Similarity, trim: float,
 
 
 def _score(x: np.ndarray, y: np.ndarray, sim: Similarity, trim: float) -> float:
+    """:func:`surface_gap` of the source nodes ``x`` placed by ``sim``."""
+    return surface_gap(sim.apply(x), y, trim)
+
+
+def surface_gap(z: np.ndarray, y: np.ndarray, trim: float) -> float:
     """The mean of both ways' squared nearest distances capped at ``trim`` between the
-    source nodes ``x`` placed by ``sim`` and the target nodes ``y``."""
-    z = sim.apply(x)
+    placed source nodes ``z`` (m, 3) and the target nodes ``y`` (n, 3): how far apart
+    the surfaces lie, whatever the density of their sampling and what one of them lacks."""
     ds, dt = cKDTree(y).query(z)[0], cKDTree(z).query(y)[0]
     return float(np.mean(np.minimum(ds, trim) ** 2) + np.mean(np.minimum(dt, trim) ** 2))
 
@@ -275,7 +280,10 @@ def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray, modal: Similarity) 
     near-symmetric body apart, so of the poses scoring within ``_CLOSE`` of the best
     (the pose of :func:`_assignment_pose`, ``modal``, among them), each settled by the
     same rigid rounds of assignment as ``modal`` (:func:`_rigid_rounds`), the one of
-    least modal total (the search on ``sub``, modal signatures included) wins; with
+    least modal total (the search on ``sub``, modal signatures included) wins, polished
+    by the trimmed ICP again (the assignments of those rounds shift and shrink a pose
+    when the target is sampled unevenly or lacks a part: cow, 500 points sampled
+    unevenly, 0.35 -> 4.96 target spacings from the truth); with
     ``rotation="auto"`` one within ``_COMMON_ANGLE`` of the identity wins instead unless
     its total exceeds ``_COMMON_MARGIN`` x the least (the common frame, as in 2D)."""
     src, tgt = p.src, p.tgt
@@ -304,7 +312,7 @@ def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray, modal: Similarity) 
         near = [k for k in range(len(close)) if turn[k] <= _COMMON_ANGLE]
         if near and min(totals[k] for k in near) <= _COMMON_MARGIN * totals[best]:
             best = min(near, key=totals.__getitem__)
-    sim = close[best]
+    sim = _trimmed_icp(x, y, close[best], trim, rotate)[1]
     return Pose(sim, sim, False, rotate, False)
 
 
