@@ -176,7 +176,8 @@ def _transport(z: np.ndarray, mu: np.ndarray, y: np.ndarray, nu: np.ndarray,
         lone = d1[:, 0] > _REACH * temperature
     else:
         rows = np.repeat(np.arange(s), np.diff(graph.indptr))
-        d2 = np.sum((z[rows] - y[graph.indices]) ** 2, axis=1)
+        d = z[rows] - y[graph.indices]
+        d2 = d[:, 0] ** 2 + d[:, 1] ** 2 + d[:, 2] ** 2  # np.sum's order, bit for bit, faster
         P = graph.copy()
         P.data = graph.data * np.exp(-0.5 * d2 / temperature**2)
         lone = np.minimum.reduceat(d2, graph.indptr[:-1]) > (_REACH * temperature) ** 2
@@ -185,7 +186,8 @@ def _transport(z: np.ndarray, mu: np.ndarray, y: np.ndarray, nu: np.ndarray,
     for _ in range(_SINKHORN if max(s, t) <= _MANY_POINTS else _SINKHORN_MANY):
         a = np.where(lone, 0.0, (mu / (P @ b)) ** _RELAX)
         b = (nu / np.maximum(P.T @ a, 1e-300)) ** _RELAX
-    plan = P.multiply(a[:, None]).multiply(b[None, :]).tocsr()
+    plan = P.copy()  # P scaled by a along its rows and b along its columns
+    plan.data = P.data * np.repeat(a, np.diff(P.indptr)) * b[P.indices]
     row = np.asarray(plan.sum(axis=1)).ravel()
     return (plan @ y) / np.maximum(row, 1e-300)[:, None], np.minimum(row / mu, 1.0)
 
