@@ -298,7 +298,11 @@ def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray, modal: Similarity) 
     (xs, ys, trim) = (*_spread(src, _SCOUT_NODES)[:1], *_spread(tgt, _SCOUT_NODES))
     scouts = [_trimmed_icp(xs, ys, Similarity(r, 1.0, zero), trim, rotate, _SCOUT_ROUNDS)
               for r in rots]
-    best = _distinct([scouts[r][1] for r in sorted(range(len(rots)), key=lambda r: scouts[r][0])])
+    order = sorted(range(len(rots)), key=lambda r: scouts[r][0])
+    if p.rotation == "auto":  # the identity's always goes on: a featureless body (a sphere)
+        order.remove(0)       # scores alike in every pose, and the common frame must compete
+        order.insert(0, 0)
+    best = _distinct([scouts[r][1] for r in order])
     (x, y, trim) = (*_spread(src, _ICP_NODES)[:1], *_spread(tgt, _ICP_NODES))
     tried = [_trimmed_icp(x, y, sim, trim, rotate) for sim in best]
     tried.append((_score(x, y, modal, trim), modal))
