@@ -285,7 +285,9 @@ def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray, modal: Similarity) 
     when the target is sampled unevenly or lacks a part: cow, 500 points sampled
     unevenly, 0.35 -> 4.96 target spacings from the truth); with
     ``rotation="auto"`` one within ``_COMMON_ANGLE`` of the identity wins instead unless
-    its total exceeds ``_COMMON_MARGIN`` x the least (the common frame, as in 2D)."""
+    its total exceeds ``_COMMON_MARGIN`` x the least (the common frame, as in 2D), the
+    identity's start always among the second stage's (a sphere scores alike in every pose:
+    it had lost there, and the pairs turned the sphere 169-171 degrees)."""
     src, tgt = p.src, p.tgt
     rotate = p.rotation != "none"
     rots = np.eye(3)[None]
