@@ -482,3 +482,27 @@ def test_smooth_warp_in_one_frame_keeps_the_along_contour_position(seed, monkeyp
     assert slipped(match(source, target)) <= 0.01  # measured 0 for both
     monkeypatch.setattr(coherent, "drift", lambda fit, placed, pairs: placed.z)
     assert slipped(match(source, target)) >= 0.05  # the test can fail
+
+
+def test_searches_compile_uncached_with_one_warning_where_no_cache_can_be_written(monkeypatch):
+    # a read-only install and no home: numba refuses cache=True at decoration
+    import numba
+
+    from modalmorph.matching import _dp
+
+    real = numba.njit
+
+    def njit(*args, cache=False, **kwargs):
+        if cache:
+            raise RuntimeError("cannot cache function 'f': no locator available")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(_dp.numba, "njit", njit)
+    monkeypatch.setattr(_dp._compiled, "warned", False)
+
+    def double(x):
+        return 2.0 * x
+
+    with pytest.warns(RuntimeWarning, match="cannot be cached.*NUMBA_CACHE_DIR") as said:
+        f, g = _dp._compiled(double), _dp._compiled(double)
+    assert len(said) == 1 and f(1.5) == g(1.5) == 3.0

@@ -22,6 +22,8 @@ the previous row may end there too, the first column from which skipping is chea
 
 from __future__ import annotations
 
+import warnings
+
 import numba
 import numpy as np
 
@@ -29,7 +31,25 @@ __all__ = ["ordered", "totals", "placed_search", "placed_cost", "pose_costs", "s
            "band_sq_dist"]
 
 
-@numba.njit(cache=True, nogil=True)
+def _compiled(fn):
+    """``fn`` compiled, its machine code cached beside this file or in the user's cache
+    folder; where neither can be written (a read-only install and no home), compiled
+    anew in each process, said once."""
+    try:
+        return numba.njit(cache=True, nogil=True)(fn)
+    except RuntimeError as exc:  # numba: "cannot cache function ...: no locator available"
+        if not _compiled.warned:
+            _compiled.warned = True
+            warnings.warn(f"modalmorph's compiled searches cannot be cached ({exc}); each "
+                          "process compiles them anew (about 5 s): set NUMBA_CACHE_DIR to a "
+                          "writable folder", RuntimeWarning, stacklevel=2)
+        return numba.njit(nogil=True)(fn)
+
+
+_compiled.warned = False
+
+
+@_compiled
 def _candidates(row, skip, cand):  # pragma: no cover - compiled
     """Write the columns of ``row`` costing at most ``skip`` into ``cand``, ascending;
     returns how many."""
@@ -41,19 +61,19 @@ def _candidates(row, skip, cand):  # pragma: no cover - compiled
     return nc
 
 
-@numba.njit(cache=True, nogil=True)
+@_compiled
 def _fill(out, value):  # pragma: no cover - compiled
     for k in range(len(out)):  # from 0: no negative index to wrap, so vectorised
         out[k] = value
 
 
-@numba.njit(cache=True, nogil=True)
+@_compiled
 def _add(a, value, out):  # pragma: no cover - compiled
     for k in range(len(out)):
         out[k] = a[k] + value
 
 
-@numba.njit(cache=True, nogil=True)
+@_compiled
 def _row(row, cand, i, rule, F, events, e):  # pragma: no cover - compiled
     """Row ``i`` of the programme under ``rule = (skip, repeat, doubled)``: row i + 1 of
     ``F`` from row i (``F`` keeps two rows, ``F[i % 2]`` is row i), the costs ``row`` (n,)
@@ -120,7 +140,7 @@ def _row(row, cand, i, rule, F, events, e):  # pragma: no cover - compiled
     return e
 
 
-@numba.njit(cache=True, nogil=True)
+@_compiled
 def _room(events, e, n):  # pragma: no cover - compiled
     """``events`` with room for one more row of ``n`` columns doubled after ``e``."""
     if e + 2 * n <= events.shape[1]:
@@ -132,7 +152,7 @@ def _room(events, e, n):  # pragma: no cover - compiled
     return grown
 
 
-@numba.njit(cache=True, nogil=True)
+@_compiled
 def _backtrack(events, starts, N):  # pragma: no cover - compiled
     """``j`` (m,) from the events of each row (row i's from ``starts[i]``)."""
     m = len(starts) - 1
@@ -149,7 +169,7 @@ def _backtrack(events, starts, N):  # pragma: no cover - compiled
     return j
 
 
-@numba.njit(cache=True, nogil=True)
+@_compiled
 def ordered(C, rule):  # pragma: no cover - compiled
     """Order-preserving matching over ``C`` (m, n), C-contiguous float64, under ``rule =
     (skip, repeat, doubled)`` (``doubled``: its columns twice over). Returns ``j`` (m,),
@@ -169,7 +189,7 @@ def ordered(C, rule):  # pragma: no cover - compiled
     return _backtrack(events, starts, N), F[m % 2, N]
 
 
-@numba.njit(cache=True, nogil=True)
+@_compiled
 def totals(C, rule):  # pragma: no cover - compiled
     """The least total cost of :func:`ordered` for each problem of ``C`` (b, m, n)."""
     b, m, n = C.shape
@@ -186,7 +206,7 @@ def totals(C, rule):  # pragma: no cover - compiled
     return out
 
 
-@numba.njit(cache=True, nogil=True)
+@_compiled
 def placed_cost(xx, yy, G2, S, r, i, j, h2):  # pragma: no cover - compiled
     """``max(xx[i] + yy[j] - G2[i, j], 0) / h2 + S[r, j]``: numpy's ``sq_dist(x, y) / h2 +
     S[rows]`` (``G2 = 2 x y^T``) in its order of operations, so bit for bit."""
@@ -195,7 +215,7 @@ def placed_cost(xx, yy, G2, S, r, i, j, h2):  # pragma: no cover - compiled
     return c / h2 + S[r, j]
 
 
-@numba.njit(cache=True, nogil=True)
+@_compiled
 def placed_search(xx, yy, G2, S, rows, h2, rule):  # pragma: no cover - compiled
     """:func:`ordered` over the cost of source nodes placed at ``x`` against the target
     ``y``, :func:`placed_cost`, each row made when the search reaches it (no (m, n) cost
@@ -236,7 +256,7 @@ def placed_search(xx, yy, G2, S, rows, h2, rule):  # pragma: no cover - compiled
     return j, cost
 
 
-@numba.njit(cache=True, nogil=True)
+@_compiled
 def pose_costs(rots, x, y, h2, S):  # pragma: no cover - compiled
     """The pose search's cost (r, m, n) of 2D nodes ``x`` (m, 2) turned by each of
     ``rots`` (r, 2, 2) against ``y`` (n, 2): ``|R x_i - y_j|^2 / h2 + S[i, j]`` with
@@ -261,7 +281,7 @@ def pose_costs(rots, x, y, h2, S):  # pragma: no cover - compiled
 _TINY = np.finfo(np.float64).tiny
 
 
-@numba.njit(cache=True, nogil=True)
+@_compiled
 def shared_weights(E, valid, band, n):  # pragma: no cover - compiled
     """The coherent pass's E-step after the exponential ``E`` (k, b): ``K = E`` where
     ``valid`` (else 0), each of the ``n`` target nodes' ``share`` of it (``np.bincount``
@@ -281,7 +301,7 @@ def shared_weights(E, valid, band, n):  # pragma: no cover - compiled
     return P
 
 
-@numba.njit(cache=True, nogil=True)
+@_compiled
 def band_sq_dist(z, yb):  # pragma: no cover - compiled
     """``np.sum((z[:, None, :] - yb) ** 2, axis=2)`` (k, b) for 2D ``z`` (k, 2) and
     ``yb`` (k, b, 2), bit for bit (numpy adds the two squares in order)."""
