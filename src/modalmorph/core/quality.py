@@ -357,8 +357,9 @@ def correspondence_rotation(source, target, pairs) -> float:
     if pairs.ndim != 2 or pairs.shape[1] != 2 or not np.issubdtype(pairs.dtype, np.integer):
         raise ValueError(f"pairs must be an integer array of shape (K, 2), got "
                          f"{pairs.dtype} {pairs.shape}")
-    R = align(src[pairs[:, 0]], tgt[pairs[:, 1]], scale=True).rotation
-    if R.shape[0] == 2:
+    sim = align(src[pairs[:, 0]], tgt[pairs[:, 1]], scale=True)
+    if src.shape[1] == 2:
+        R = sim.rotation
         angle = float(np.degrees(np.arctan2(R[1, 0], R[0, 0])))
         return 180.0 if angle <= -180.0 else angle
-    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))
+    return sim.angle

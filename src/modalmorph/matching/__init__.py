@@ -225,8 +225,9 @@ def _nearer_surface(placed: Placement, sim: Similarity, costs: Costs, spacing: f
     distances capped at ``_GAP_TRIM`` target spacings): the alternation's one-to-one
     assignments drag the source towards where a target sampled unevenly is dense, or
     over a part that the target lacks."""
-    trim, posed = _GAP_TRIM * spacing, sim.apply(costs.x)
-    if surface_gap(posed, costs.y, trim) < surface_gap(placed.z, costs.y, trim):
+    trim, posed, tree = _GAP_TRIM * spacing, sim.apply(costs.x), cKDTree(costs.y)
+    if surface_gap(posed, costs.y, trim, tree=tree) < surface_gap(placed.z, costs.y, trim,
+                                                                  tree=tree):
         return Placement(sim, posed)
     return placed
 

@@ -27,7 +27,7 @@ import warnings
 import numba
 import numpy as np
 
-__all__ = ["ordered", "totals", "placed_search", "placed_cost", "pose_costs", "shared_weights",
+__all__ = ["ordered", "totals", "placed_search", "pose_costs", "shared_weights",
            "band_sq_dist"]
 
 

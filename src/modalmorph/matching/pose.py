@@ -225,7 +225,7 @@ def _trimmed_icp(x: np.ndarray, y: np.ndarray, sim: Similarity, trim: float,
         sim = align(np.r_[x[near_s], x[it[near_t]]], np.r_[y[js[near_s]], y[near_t]],
                     rotate=rotate)
         cut = max(cut * shrink, trim)
-    return _score(x, y, sim, trim), sim
+    return surface_gap(sim.apply(x), y, trim, tree=ty), sim
 
 
 def _score(x: np.ndarray, y: np.ndarray, sim: Similarity, trim: float) -> float:
@@ -233,11 +233,13 @@ def _score(x: np.ndarray, y: np.ndarray, sim: Similarity, trim: float) -> float:
     return surface_gap(sim.apply(x), y, trim)
 
 
-def surface_gap(z: np.ndarray, y: np.ndarray, trim: float) -> float:
+def surface_gap(z: np.ndarray, y: np.ndarray, trim: float, *, tree=None) -> float:
     """The mean of both ways' squared nearest distances capped at ``trim`` between the
     placed source nodes ``z`` (m, 3) and the target nodes ``y`` (n, 3): how far apart
-    the surfaces lie, whatever the density of their sampling and what one of them lacks."""
-    ds, dt = cKDTree(y).query(z)[0], cKDTree(z).query(y)[0]
+    the surfaces lie, whatever the density of their sampling and what one of them lacks.
+    ``tree``: ``y``'s k-d tree, where the caller has it."""
+    ds = (cKDTree(y) if tree is None else tree).query(z)[0]
+    dt = cKDTree(z).query(y)[0]
     return float(np.mean(np.minimum(ds, trim) ** 2) + np.mean(np.minimum(dt, trim) ** 2))
 
 

@@ -210,29 +210,33 @@ class KronField:
         """``Phi^T v`` for v (d*m,)."""
         return _kron(self._left, v, self.d)
 
+    @cached_property
+    def _p(self) -> np.ndarray:
+        """``s C L^-T``, (m, mc): the whitened basis at the model's nodes (``C = G``)."""
+        return blas.dtrmm(self.scale, self.l_inv, self.inner, side=1, lower=1, trans_a=1)
+
+    @cached_property
     def _block(self) -> np.ndarray:
-        """One component's ``Phi^T Phi``, (mc, mc)."""
+        """One component's ``Phi^T Phi``, (mc, mc), made once (the springs' scale and
+        Gram both read it)."""
         if self.g is None:  # (G L^-T s)^T (G L^-T s)
-            P = blas.dtrmm(self.scale, self.l_inv, self.inner, side=1, lower=1, trans_a=1)
-            return P.T @ P
+            return self._p.T @ self._p
         gtg = (self.g.T @ self.g)
         gtg = gtg.toarray() if sparse.issparse(gtg) else gtg
         if self.inner is not None:  # P^T gtg P with P = s G L^-T, Phi's block at the nodes
-            P = blas.dtrmm(self.scale, self.l_inv, self.inner, side=1, lower=1, trans_a=1)
-            return P.T @ gtg @ P  # (G gtg G first lost 1e-9 of a 3D fit's solve)
+            return self._p.T @ gtg @ self._p  # (G gtg G first lost 1e-9 of a 3D fit's solve)
         half = blas.dtrmm(self.scale, self.l_inv, gtg, lower=1)
         return blas.dtrmm(self.scale, self.l_inv, half, side=1, lower=1, trans_a=1)
 
     def gram(self) -> np.ndarray:
         """``Phi^T Phi``, (n, n)."""
-        return np.kron(np.eye(self.d), self._block())
+        return np.kron(np.eye(self.d), self._block)
 
     def sq_norm(self) -> float:
         """The sum of the squares of ``Phi``, the trace of ``Phi^T Phi``."""
         if self.g is None:
-            P = blas.dtrmm(self.scale, self.l_inv, self.inner, side=1, lower=1, trans_a=1)
-            return float(self.d * np.vdot(P, P))
-        return float(self.d * np.trace(self._block()))
+            return float(self.d * np.vdot(self._p, self._p))
+        return float(self.d * np.trace(self._block))
 
     def dense(self) -> np.ndarray:
         """``Phi`` itself, (d*m, n)."""
@@ -323,7 +327,7 @@ class ElementBasis:
     @cached_property
     def shapes(self) -> np.ndarray:
         """``Phi`` at the model's nodes, (d*mc, n)."""
-        return self.field().dense()
+        return self._at_model.dense()
 
     def stiffness(self) -> np.ndarray:
         """``Phi^T K Phi``, (n, n), full."""
@@ -331,8 +335,11 @@ class ElementBasis:
 
     def at_nodes(self, x: np.ndarray) -> np.ndarray:
         """``Phi x`` at the model's nodes: ``s (I kron G L^-T) x``."""
-        return _kron(lambda X: self.model.gram[0] @ blas.dtrmm(
-            self.scale, self.l_inv, X, lower=1, trans_a=1), x, self.model.dim)
+        return self._at_model.dot(x)
+
+    @cached_property
+    def _at_model(self) -> KronField:
+        return self.field()
 
     def mass(self, y: np.ndarray) -> np.ndarray:
         """``M Phi y = rho^1/2 (I kron A L) y`` at the model's nodes."""
