@@ -92,8 +92,18 @@ CARRY = 4
 # on the subsets of a set above FINE_CLOUD (the pose the coarse match gives is 2 deg off and
 # refine alone halves that). 1 000 000 points, 30 deg, median pair error in target
 # spacings: blob 0 / 1 / 2 / 3 passes 4.30 / 3.22 / 2.75 / 2.71 (19.0 / 21.5 / 22.8 / 27.4
-# CPU-s); bunny 1.84 -> 1.74 (0 deg 1.73 -> 1.71, 90 deg 1.70 -> 1.39).
-POSE_PASSES = 2
+# CPU-s); bunny 1.84 -> 1.74 (0 deg 1.73 -> 1.71, 90 deg 1.70 -> 1.39). With HUGE_SMOOTHING,
+# 3 passes against 4: blob 90 / 180 deg 3.27 / 4.24 against 3.13 / 4.29.
+POSE_PASSES = 3
+# The levels of refine after those passes (from its second: the first is the passes') smooth
+# the moves this many cube widths wide instead of refine's 8: a finer transport under a
+# stiffer field (the first level's field at the second level's transport). 1 000 000 points,
+# median pair error in target spacings at 0 / 30 / 90 / 180 deg (docs/issue25/scale.md):
+# blob 3.53 / 2.63 / 3.56 / 4.81 -> 3.10 / 1.86 / 3.27 / 4.24 (12 at 0 and 90 deg: 3.65,
+# 3.37); bunny 30 deg 1.67 -> 2.27, 0 / 90 / 180 deg 1.28 / 1.70 / 1.78 (main 1.71 / 1.39
+# / 1.55). 16 in the passes themselves: the first level's field no longer turns (blob 0
+# deg: 2.2 deg off after 4 passes).
+HUGE_SMOOTHING = 16.0
 # refine() of a 3D point set up to FINE_CLOUD nodes starts this many times coarser than
 # the start _coarse_landing gives (16 times coarser than the modal matcher's nodes instead
 # of 4; benchmarks/match3d.py, median in target spacings, 1 -> 4: torus cut 1000 at 30
@@ -308,9 +318,9 @@ def _huge_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> n
     larger ``FINE_CLOUD`` nodes): the subset's :func:`_coarse_landing`; ``POSE_PASSES``
     times, the first level of :func:`~modalmorph.matching.clouds.refine` from the best
     similarity of the landings so far (the pose, without the deformation that came with
-    it); every level of ``refine``; and every source node carried by the similarity of
-    the subset's landings (Horn) plus the rest of the move of its ``CARRY`` nearest
-    subset nodes (inverse-distance weights)."""
+    it); the other levels of ``refine``, smoothed ``HUGE_SMOOTHING`` cube widths wide; and
+    every source node carried by the similarity of the subset's landings (Horn) plus the
+    rest of the move of its ``CARRY`` nearest subset nodes (inverse-distance weights)."""
     keep = FINE_CLOUD / max(src.m, tgt.m)
     x = src.points[even_subset(src.normalized, int(keep * src.m))]
     sub_s = Shape(x, ordered=False)
@@ -320,8 +330,10 @@ def _huge_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> n
     for _ in range(POSE_PASSES):
         posed = sub_t.to_normalized(align(x, sub_t.to_user(landed)).apply(x))
         landed = refine(sub_s.normalized, posed, sub_t.normalized, start, levels=1)
-    landed = tgt.to_normalized(sub_t.to_user(
-        refine(sub_s.normalized, landed, sub_t.normalized, start)))
+    # refine from its second level: a start 4 times finer halves the first cubes' width
+    landed = refine(sub_s.normalized, landed, sub_t.normalized, 4 * start,
+                    smoothing=HUGE_SMOOTHING)
+    landed = tgt.to_normalized(sub_t.to_user(landed))
     sim = align(x, landed)
     return sim.apply(src.points) + _carried(x, landed - sim.apply(x), src.points, src.size)
 

@@ -193,7 +193,7 @@ def _transport(z: np.ndarray, mu: np.ndarray, y: np.ndarray, nu: np.ndarray,
 
 
 def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
-           levels: int | None = None) -> np.ndarray:
+           levels: int | None = None, smoothing: float = _WIDTH) -> np.ndarray:
     """Where the source lands on the target, refined coarse to fine.
 
     The first level summarises the target in cubes of about ``4 * start`` node counts'
@@ -219,6 +219,9 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
     levels : int, optional
         Stop after this many levels of cubes, coarsest first, and return the landings as
         they are then (no average); default: every level, the nodes last.
+    smoothing : float, optional
+        Width of the Gaussian smoothing of the moves, in the level's cube widths
+        (``_WIDTH`` by default).
 
     Returns
     -------
@@ -237,7 +240,7 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
             label = _cells(x, width)
             xc, mu = _means(label, x, wx)
             yc, nu = _means(_cells(y, width), y, wy)
-        smooth = _smoother(xc, mu, x, _WIDTH * width)
+        smooth = _smoother(xc, mu, x, smoothing * width)
         rounds = _ROUNDS if width == spacing else _COARSE_ROUNDS[len(mu) >= _FEW * m]
         graph = None
         for i in range(rounds):
