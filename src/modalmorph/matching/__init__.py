@@ -88,22 +88,26 @@ FINE_CLOUD = 100_000
 # Coarse or subset nodes whose moves carry a node (inverse-distance weights): the nodes so
 # carried land as well as the subset's own (1M blob: 3.79 and 3.82 spacings).
 CARRY = 4
-# Passes of refine's first level, each from the best similarity of the landings before it,
-# on the subsets of a set above FINE_CLOUD (the pose the coarse match gives is 2 deg off and
-# refine alone halves that). 1 000 000 points, 30 deg, median pair error in target
-# spacings: blob 0 / 1 / 2 / 3 passes 4.30 / 3.22 / 2.75 / 2.71 (19.0 / 21.5 / 22.8 / 27.4
-# CPU-s); bunny 1.84 -> 1.74 (0 deg 1.73 -> 1.71, 90 deg 1.70 -> 1.39). With HUGE_SMOOTHING,
-# 3 passes against 4: blob 90 / 180 deg 3.27 / 4.24 against 3.13 / 4.29.
-POSE_PASSES = 3
-# The levels of refine after those passes (from its second: the first is the passes') smooth
-# the moves this many cube widths wide instead of refine's 8: a finer transport under a
-# stiffer field (the first level's field at the second level's transport). 1 000 000 points,
-# median pair error in target spacings at 0 / 30 / 90 / 180 deg (docs/issue25/scale.md):
-# blob 3.53 / 2.63 / 3.56 / 4.81 -> 3.10 / 1.86 / 3.27 / 4.24 (12 at 0 and 90 deg: 3.65,
-# 3.37); bunny 30 deg 1.67 -> 2.27, 0 / 90 / 180 deg 1.28 / 1.70 / 1.78 (main 1.71 / 1.39
-# / 1.55). 16 in the passes themselves: the first level's field no longer turns (blob 0
-# deg: 2.2 deg off after 4 passes).
+# Passes of refine's first level, then FINE_PASSES of its second, each from the best
+# similarity of the landings before it, on the subsets of a set above FINE_CLOUD (the pose
+# the coarse match gives is 2-3 deg off, refine alone halves that, and the first level's
+# passes stop at 0.7-0.9 deg from the truth's rotation whatever the start). 1 000 000
+# points, median pair error in target spacings (docs/issue25/scale.md): with first-level
+# passes only (2, main): blob 0 / 30 / 90 / 180 deg 3.58 / 2.70 / 3.77 / 5.24; 3 and the
+# other levels smoothed 16 wide: 3.10 / 1.86 / 3.27 / 4.24; 1 + 3 second-level passes:
+# 2.03 / - / 3.06 / 3.92; 1 + 5: see the table there (90 deg 2.77, 180 deg 3.83; bunny
+# 30 deg 2.10). On the landings of the blob's subset at 0 deg: the second level's passes
+# take the turn from 0.92 deg to 0.54 / 0.34 / 0.32 deg, 3.10 -> 2.35 / 2.16 / 2.17.
+POSE_PASSES = 1
+FINE_PASSES = 5
+# Smoothing width (refine's cube widths) of the second level's passes and of the levels
+# after them (refine's own: 8): a finer transport under a stiffer field. After 2 passes of
+# the first level, the levels from the second smoothed 4 / 8 / 16 / 24 wide, landings of
+# the blob's subset at 0 deg 4.12 / 3.51 / 2.95 / -, 90 deg - / 3.65 / 3.27 / 3.75, 180 deg
+# - / 4.70 / 4.19 / 4.53; the bunny's at 30 deg 1.87 / 1.39 / 2.09 / -. 16 at the first
+# level: its field no longer turns (blob 0 deg: 2.2 deg off after 4 passes).
 HUGE_SMOOTHING = 16.0
+_SMOOTHING = {1: 8.0, 2: HUGE_SMOOTHING}  # per level of the passes
 # refine() of a 3D point set up to FINE_CLOUD nodes starts this many times coarser than
 # the start _coarse_landing gives (16 times coarser than the modal matcher's nodes instead
 # of 4; benchmarks/match3d.py, median in target spacings, 1 -> 4: torus cut 1000 at 30
@@ -316,9 +320,10 @@ def _huge_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> n
     """Where each source node lands (the target's normalised frame), (m, 3), for sets above
     ``FINE_CLOUD`` nodes, matched on even subsets of both (the same fraction of each, the
     larger ``FINE_CLOUD`` nodes): the subset's :func:`_coarse_landing`; ``POSE_PASSES``
-    times, the first level of :func:`~modalmorph.matching.clouds.refine` from the best
-    similarity of the landings so far (the pose, without the deformation that came with
-    it); the other levels of ``refine``, smoothed ``HUGE_SMOOTHING`` cube widths wide; and
+    times the first level of :func:`~modalmorph.matching.clouds.refine`, then
+    ``FINE_PASSES`` times its second (smoothed ``HUGE_SMOOTHING`` cube widths wide), each
+    from the best similarity of the landings so far (the pose, without the deformation
+    that came with it); the levels of ``refine`` from its third, smoothed as wide; and
     every source node carried by the similarity of the subset's landings (Horn) plus the
     rest of the move of its ``CARRY`` nearest subset nodes (inverse-distance weights)."""
     keep = FINE_CLOUD / max(src.m, tgt.m)
@@ -327,11 +332,13 @@ def _huge_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> n
     sub_t = Shape(tgt.points[even_subset(tgt.normalized, int(keep * tgt.m))], ordered=False)
     landed, start = _coarse_landing(sub_s, sub_t, n_modes, opts)
     landed = sub_t.to_normalized(landed)
-    for _ in range(POSE_PASSES):
-        posed = sub_t.to_normalized(align(x, sub_t.to_user(landed)).apply(x))
-        landed = refine(sub_s.normalized, posed, sub_t.normalized, start, levels=1)
-    # refine from its second level: a start 4 times finer halves the first cubes' width
-    landed = refine(sub_s.normalized, landed, sub_t.normalized, 4 * start,
+    for level, passes in ((1, POSE_PASSES), (2, FINE_PASSES)):  # refine's first levels
+        for _ in range(passes):
+            posed = sub_t.to_normalized(align(x, sub_t.to_user(landed)).apply(x))
+            landed = refine(sub_s.normalized, posed, sub_t.normalized, start * 4 ** (level - 1),
+                            levels=1, smoothing=_SMOOTHING[level])
+    # refine from its third level: a start 16 times finer makes the first cubes 4 times smaller
+    landed = refine(sub_s.normalized, landed, sub_t.normalized, 16 * start,
                     smoothing=HUGE_SMOOTHING)
     landed = tgt.to_normalized(sub_t.to_user(landed))
     sim = align(x, landed)
