@@ -191,11 +191,10 @@ def on_faces(result, src, tgt):
     """The end shape's mean distance to the target's faces and the target's vertices' to
     the end shape's faces, in tolerances; the pairs' turn (degrees)."""
     from modalmorph.core.align import align
-    from modalmorph.core.surfaces import closest_on_faces
+    from modalmorph.core.surfaces import face_distances
     end, pairs = np.asarray(result.shapes[-1]), result.matching.pairs
-    ab = np.linalg.norm(end - closest_on_faces(end, tgt.points, tgt.faces), axis=1).mean()
-    ba = np.linalg.norm(tgt.points - closest_on_faces(tgt.points, end, src.faces),
-                        axis=1).mean()
+    ab = face_distances(end, tgt.points, tgt.faces).mean()
+    ba = face_distances(tgt.points, end, src.faces).mean()
     turn = align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]]).angle
     return f"{ab / result.tolerance:6.2f} {ba / result.tolerance:6.2f} {turn:4.0f}"
 

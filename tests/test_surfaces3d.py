@@ -11,7 +11,7 @@ import modalmorph as mm
 from modalmorph.core import surfaces
 from modalmorph.core.affine import affine_fit_weights
 from modalmorph.core.dynamics import LoadTargets
-from modalmorph.core.surfaces import closest_on_faces
+from modalmorph.core.surfaces import closest_on_faces, face_distances
 from modalmorph.simulation.basis import flat, nodes
 from modalmorph.simulation.stop import Limits, SurfaceStop
 from modalmorph.simulation.system import ModalSystem
@@ -112,7 +112,7 @@ def test_3d_nodes_sharing_a_partner_are_released_and_carried_affinely():
     pairs = np.r_[pairs, [[100, 5], [101, 5]]]  # two more pulled to node 5's partner
     source[100], source[101] = source[5] + 0.2, source[5] - 0.3
     target[5] = TURN.apply(source[5])
-    loads = LoadTargets(source, target, pairs, ordered=False, closed=False, neighbours=12)
+    loads = LoadTargets(source, target, pairs, ordered=False, neighbours=12)
     kept = loads.pairs
     assert len(kept) == 100 and len(np.unique(kept[:, 1])) == 100
     trio = source[[5, 100, 101]]
@@ -201,9 +201,9 @@ def test_carried_nodes_are_pulled_onto_the_target_faces():
     target = TURN.apply(b * RADII)
     pairs = np.c_[np.arange(162), np.arange(162)]
     for faces in (fb, None):
-        loads = LoadTargets(a, target, pairs, ordered=False, closed=True)
-        goal = (loads if faces is None else loads.onto_faces(faces)).targets(a)
-        off = np.linalg.norm(goal - closest_on_faces(goal, target, fb), axis=1)
+        loads = LoadTargets(a, target, pairs, ordered=False, faces=faces)
+        goal = loads.targets(a)
+        off = face_distances(goal, target, fb)
         assert (off.max() < 1e-12) == (faces is not None), off.max()
 
 

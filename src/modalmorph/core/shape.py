@@ -145,6 +145,11 @@ class Shape:
         return None if len(sizes) == 1 else tuple(int(k) for k in sizes)
 
     @property
+    def has_faces(self) -> bool:
+        """Whether the shape is a triangle surface: ``faces`` given and not empty."""
+        return self.faces is not None and len(self.faces) > 0
+
+    @property
     def m(self) -> int:
         """Number of nodes."""
         return self.points.shape[0]

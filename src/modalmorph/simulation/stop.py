@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 
 from ..core.quality import Polyline
 from ..core.shape import Shape, even_subset, resample
-from ..core.surfaces import closest_on_faces
+from ..core.surfaces import face_distances, face_tree
 from ..options import MorphOptions
 
 __all__ = ["COARSE_FLOOR", "ContourStop", "CurveStop", "LAZY_SPACINGS", "Limits", "PLANE",
@@ -190,7 +190,7 @@ class SurfaceStop(StopTest):
         self.target = target
         self.faces = faces
         self.tree = cKDTree(target)
-        self.face_tree = None if faces is None else cKDTree(target[faces].mean(axis=1))
+        self.face_tree = None if faces is None else face_tree(target, faces)
         self.floor = float(to_surface(target, target, self.tree, skip=1).mean())
         spacing = self.tree.query(target, k=2)[0][:, 1].mean()
         self.gate = limits.tolerance + LAZY_SPACINGS * spacing
@@ -210,14 +210,12 @@ class SurfaceStop(StopTest):
         if self.faces is None:
             d_ab = float(to_surface(current, Y, self.tree).mean()) - self.floor
         else:
-            on = closest_on_faces(current, Y, self.faces, self.face_tree)
-            d_ab = float(np.linalg.norm(current - on, axis=1).mean())
+            d_ab = float(face_distances(current, Y, self.faces, self.face_tree).mean())
         if self.source_faces is None:
             d_ba = max(float(to_surface(Y, current, cKDTree(current)).mean()) - self.coarse,
                        self.floor) - self.floor
         else:
-            d_ba = float(np.linalg.norm(Y - closest_on_faces(Y, current, self.source_faces),
-                                        axis=1).mean()) - self.floor
+            d_ba = float(face_distances(Y, current, self.source_faces).mean()) - self.floor
         surface = max(d_ab, d_ba, 0.0)
         return max(surface, near) if self.pairs else surface
 
@@ -233,14 +231,10 @@ def choose_stop_test(source: Shape, target: Shape, target_n: np.ndarray,
         return CurveStop(limits, target_n, closed=source.closed,
                          target_closed=target.closed, m=source.m)
     if source.dim == 3 and min(source.m, target.m) > PLANE:
-        return SurfaceStop(limits, target_n, m=source.m, faces=_faces(target),
-                           source_faces=_faces(source))
+        return SurfaceStop(limits, target_n, m=source.m,
+                           faces=target.faces if target.has_faces else None,
+                           source_faces=source.faces if source.has_faces else None)
     return PairStop(limits)
-
-
-def _faces(shape: Shape) -> np.ndarray | None:
-    """A surface's triangles; None for a point set."""
-    return shape.faces if shape.faces is not None and len(shape.faces) else None
 
 
 def to_surface(points: np.ndarray, cloud: np.ndarray, tree: cKDTree,
