@@ -31,6 +31,7 @@ from .element import (
     singular_gram,
     squared_norms,
     stiffness_entries,
+    stiffness_matrix,
 )
 from .material import POLYETHYLENE, Material
 from .modes import Modes
@@ -251,10 +252,8 @@ class FEModel:
         """Dense stiffness in the Gaussian basis, ``K_g`` (dm, dm), component-major (7)."""
         self._check_dense("K_g")
         lam, mu = self.lame
-        blocks = stiffness_entries(self._offsets, self.width, lam, mu, r2=self._r2,
-                                   gamma=self.gram[1])  # (m, m, d, d)
-        dm = self.dim * self.m
-        return np.ascontiguousarray(blocks.transpose(2, 0, 3, 1).reshape(dm, dm))
+        return stiffness_matrix(self._offsets, self.width, lam, mu, r2=self._r2,
+                                gamma=self.gram[1])
 
     # -- sparse model: pairs within the cutoff radius ----------------------------------
 
