@@ -13,7 +13,7 @@ from scipy.spatial import cKDTree
 
 from ..errors import ShapeError
 
-__all__ = ["ImageFrame", "Shape", "as_shape", "check_pairs", "check_once", "coarsen",
+__all__ = ["ImageFrame", "Shape", "as_shape", "check_pairs", "check_once", "forget_checks", "coarsen",
            "even_subset", "resample", "share", "spread_indices", "GRID_ROUNDS", "HUGE",
            "FPS_POOL", "FPS_TREE", "PASSED_KEPT"]
 
@@ -282,6 +282,13 @@ def _contour_edges(start: int, stop: int, closed: bool) -> np.ndarray:
     if closed:
         j[-1] = start
     return np.c_[i, j]
+
+
+def forget_checks() -> None:
+    """Forget the checks :func:`check_once` remembers (a benchmark times each call as the
+    first one on its objects)."""
+    with _passed_lock:
+        _passed.clear()
 
 
 def _validate_points(points, name: str) -> np.ndarray:
