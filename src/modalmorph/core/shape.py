@@ -13,9 +13,9 @@ from scipy.spatial import cKDTree
 
 from ..errors import ShapeError
 
-__all__ = ["ImageFrame", "Shape", "as_shape", "check_pairs", "check_once", "forget_checks", "coarsen",
-           "even_subset", "resample", "share", "spread_indices", "GRID_ROUNDS", "HUGE",
-           "FPS_POOL", "FPS_TREE", "PASSED_KEPT"]
+__all__ = ["ImageFrame", "Shape", "as_shape", "check_pairs", "check_once", "forget_checks",
+           "coarsen", "even_subset", "resample", "share", "spread_indices", "GRID_ROUNDS",
+           "HUGE", "FPS_POOL", "FPS_TREE", "PASSED_KEPT"]
 
 # Two nodes closer than this fraction of the object's RMS radius are "the same node".
 _REPEAT_TOL = 1e-9
