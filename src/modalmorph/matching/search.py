@@ -115,9 +115,7 @@ def _pairs_from_j(j: np.ndarray, cost: np.ndarray, one_to_one: bool):
     the pair's cost ``cost`` (m,) of every source node."""
     i = np.flatnonzero(j >= 0)
     pairs = np.stack([i, j[i]], axis=1)  # np.c_ costs 10 us more a call
-    # a cyclic search may reuse a target once across the cut (else nothing to drop: the
-    # pairs as they are, 3 us instead of 35)
-    if one_to_one and len(pairs) and np.bincount(pairs[:, 1]).max() > 1:
+    if one_to_one and len(pairs):  # a cyclic search may reuse a target once across the cut
         order = np.argsort(cost[i], kind="stable")
         _, first = np.unique(pairs[order, 1], return_index=True)
         pairs = pairs[np.sort(order[first])]
