@@ -221,3 +221,24 @@ def test_a_large_turn_of_the_pairs_is_said_with_its_remedy():
     assert "turn the source by 169 deg" in said and "remove_rigid=true" in said
     said = intersection_sentence(counts, model_nodes=400, nodes=642, turn=TURN_HINT - 1)
     assert said.endswith("model_nodes=642 (a model of every node, not 400) may avoid them")
+
+
+
+def test_a_coarse_shape_that_leaves_the_target_tips_is_not_converged():
+    """162 nodes on an ellipsoid (2, 1, 0.5) of 642 vertices, spread over it as its own
+    vertices are: within the tolerance; the same nodes slid along it towards its middle,
+    every one on it, an eighth of its length at either end beyond them: not. The
+    quadrics of their nearest nodes lie on the ellipsoid and had bridged the tips
+    (measured: 1.0 tolerance, and 0.55 with a tenth left; now 2.1 and 0.94). The
+    matcher's pairs of a sphere onto such an ellipsoid left its tips so, said converged."""
+    limits = Limits(tolerance=0.005, at_rest=0.0, stall=False, max_steps=10)
+    fine, _ = icosphere(3)
+    coarse, _ = icosphere(2)
+    radii = np.array([1.0, 0.5, 0.25])
+    stop = SurfaceStop(limits, fine * radii, m=162)
+    even = TURN.apply(coarse) * radii  # no node on the long axis
+    assert stop.distance(even, 0.0, lazy=False) <= 0.1 * limits.tolerance
+    x = 0.75 * even[:, 0]
+    slide = np.sqrt((1 - x**2) / np.sum((even[:, 1:] / radii[1:]) ** 2, axis=1))
+    crowded = np.c_[x, even[:, 1:] * slide[:, None]]  # on the ellipsoid, |x| <= 0.75
+    assert stop.distance(crowded, 0.0, lazy=False) > 1.5 * limits.tolerance

@@ -169,7 +169,13 @@ class SurfaceStop(StopTest):
     roughness ``floor`` (0 at least). A source of ``m`` nodes, fewer than the target's,
     cannot follow the target more closely than ``m`` points spread over it do: the
     target's distance to the shape's surface is measured less ``coarse``, what such a
-    sample (:func:`even_subset`) leaves beyond ``floor``. A target so coarse that its
+    sample (:func:`even_subset`) leaves beyond ``floor``; and since a surface through
+    its nodes passes over a part of the target they do not reach, the target's points
+    farther from the shape's nodes than ``cover``, the farthest any target point lies
+    from that sample, count by how much farther (a sphere of 162 vertices onto an
+    ellipsoid (2, 1, 0.5) of 642 by pairs that left its tips unreached was said
+    converged: its quadrics bridged the tips; the true pairs leave none beyond
+    ``cover``, method.md §5). A target so coarse that its
     ``floor`` exceeds ``COARSE_FLOOR`` tolerances hides any distance below it: the mean
     distance of the pulled pairs, ``near``, then counts too (``pairs``). Surfaces with
     faces are their triangles: the shape's distance to a target with ``faces`` is to
@@ -194,10 +200,12 @@ class SurfaceStop(StopTest):
         self.floor = float(to_surface(target, target, self.tree, skip=1).mean())
         spacing = self.tree.query(target, k=2)[0][:, 1].mean()
         self.gate = limits.tolerance + LAZY_SPACINGS * spacing
-        self.coarse = 0.0
+        self.coarse = self.cover = 0.0
         if m is not None and PLANE < m < len(target):  # a source coarser than the target
             sample = target[even_subset(target, m)]
-            left = float(to_surface(target, sample, cKDTree(sample)).mean())
+            tree = cKDTree(sample)
+            self.cover = float(tree.query(target)[0].max())
+            left = float(to_surface(target, sample, tree).mean())
             self.coarse = max(left - self.floor, 0.0)
         self.source_faces = source_faces if m is not None and m >= len(target) else None
         quadrics = faces is None or self.source_faces is None  # whose floor hides
@@ -212,8 +220,12 @@ class SurfaceStop(StopTest):
         else:
             d_ab = float(face_distances(current, Y, self.faces, self.face_tree).mean())
         if self.source_faces is None:
-            d_ba = max(float(to_surface(Y, current, cKDTree(current)).mean()) - self.coarse,
+            tree = cKDTree(current)
+            d_ba = max(float(to_surface(Y, current, tree).mean()) - self.coarse,
                        self.floor) - self.floor
+            if self.cover:
+                beyond = np.maximum(tree.query(Y)[0] - self.cover, 0.0).mean()
+                d_ba = max(d_ba, float(beyond))
         else:
             d_ba = float(face_distances(Y, current, self.source_faces).mean()) - self.floor
         surface = max(d_ab, d_ba, 0.0)
