@@ -155,9 +155,14 @@ def main(argv=None):
     parser.add_argument("--reference", type=int, default=0, metavar="K",
                         help="time the dense transcription on the first K pairs per family")
     parser.add_argument("--track", action="store_true")
+    parser.add_argument("--tuned", action="store_true",
+                        help="tune glibc's allocator first, as the command line does "
+                        "(modalmorph.threads.tune_allocator); default: the library's")
     args = parser.parse_args(argv)
+    tuned = args.tuned and mm.threads.tune_allocator()
     print(f"# {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
           f"numpy {np.__version__}, modalmorph {mm.__version__}, best of {args.repeat}; "
+          f"allocator {'tuned' if tuned else 'as the library leaves it'}; "
           f"load average {os.getloadavg()[0]:.1f}")
     families = corpus(args.chars)
     print(f"{'family':>7} {'nodes':>5} {'pairs':>5} {'fail':>4}  {'wall med':>8} "

@@ -21,10 +21,10 @@ def test_neighbourhood_rule_same_in_both_passes(monkeypatch, small):
     rng = np.random.default_rng(3)
     keep = np.sort(rng.choice(120, 50, replace=False))
     pairs = np.c_[keep, keep]
-    reference = LoadTargets(a, b, pairs, ordered=True,
+    reference = LoadTargets(a, b, pairs, ordered=True, closed=(True, True),
                             rule="mean").targets(a + 1.0)
     monkeypatch.setattr(dynamics, "_SMALL_GROUP", small)
-    got = LoadTargets(a, b, pairs, ordered=True, rule="mean").targets(a + 1.0)
+    got = LoadTargets(a, b, pairs, ordered=True, closed=(True, True), rule="mean").targets(a + 1.0)
     assert_allclose(got, reference, rtol=1e-12)
 
 
@@ -62,7 +62,7 @@ def test_arclength_rule_backwards_round_a_closed_target():
     a, b = _pair(60)
     reversed_b = b[::-1].copy()  # source node i belongs with reversed_b[59 - i] = b[i]
     pairs = np.c_[[0, 10, 30], [59, 49, 29]]
-    t = LoadTargets(a, reversed_b, pairs, ordered=True).targets(a)
+    t = LoadTargets(a, reversed_b, pairs, ordered=True, closed=(True, True)).targets(a)
     from scipy.spatial import cKDTree
 
     # nodes 1..9 land on b's stretch from b[0] to b[10], in order

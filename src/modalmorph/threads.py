@@ -16,12 +16,16 @@ The public calls (:func:`modalmorph.match`, :func:`modalmorph.morph`,
 :func:`modalmorph.track`) run inside :func:`limit`; a call inside another keeps the outer
 call's choice.
 
-The first such call also tunes glibc's allocator (:func:`tune_allocator`): glibc hands
-freed memory back to the system once more than twice its largest freed block lies free
-at the top of its heap, so the (dm, dm) temporaries of each morph (2 MB at 250 nodes)
-came back as fresh pages every call: 5100 minor page faults in a 250-node heart morph,
-28 ms CPU against 19 ms without them (one thread, ``benchmarks/speed.py``'s heart pair 3;
-the match: 80 faults). ``MODALMORPH_MALLOC=system`` leaves the allocator as it is.
+The command line (and so the web app and local batches) tunes glibc's allocator at start
+(:func:`tune_allocator`); a program using the library may call it once itself. glibc
+hands freed memory back to the system once more than twice its largest freed block lies
+free at the top of its heap, so the (dm, dm) temporaries of each morph (2 MB at 250
+nodes) came back as fresh pages every call: 5100 minor page faults in a 250-node heart
+morph, 28 ms CPU against 19 ms without them (one thread, ``benchmarks/speed.py``'s heart
+pair 3; the match: 80 faults). The library does not tune it on its own: the setting is
+the whole process's, and the process keeps up to ``TRIM_THRESHOLD`` of freed memory
+(after a 1000-node 2D morph 250 MiB resident against 196 MiB). ``MODALMORPH_MALLOC=system``
+leaves the allocator as it is.
 """
 
 from __future__ import annotations
@@ -40,8 +44,9 @@ _ENV = "MODALMORPH_BLAS_THREADS"
 
 # glibc's mallopt: blocks below MMAP_THRESHOLD come from its heap (32 MiB, the ceiling of
 # glibc's own adaptive threshold on 64-bit), which keeps up to TRIM_THRESHOLD free at its top
-# (64 MiB; a 1000-node morph's temporaries are 32 MB each): no page faults at 70-1000 nodes,
-# the peak memory (ru_maxrss) of match + morph at 70 and 250 nodes unchanged (216 MB).
+# (64 MiB; a 1000-node 2D morph's temporaries are 32 MB each): no page faults in 2D at
+# 70-1000 nodes (a 1000-node 3D morph's 72 MB temporaries still come from mmap), the peak
+# memory (ru_maxrss) of match + morph at 70 and 250 nodes unchanged (216 MB).
 MMAP_THRESHOLD = 32 << 20
 TRIM_THRESHOLD = 64 << 20
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3  # malloc.h
@@ -116,7 +121,6 @@ def limit(nodes: int):
         from threadpoolctl import ThreadpoolController
 
         _controller.append(ThreadpoolController())
-        tune_allocator()
     _state.depth = 1
     try:
         with _controller[0].limit(limits=blas_threads(nodes), user_api="blas"):

@@ -91,11 +91,15 @@ class LoadTargets:
         converged on them, method.md §5).
     """
 
-    def __init__(self, source, target, pairs, *, ordered: bool,
-                 closed: tuple[bool, bool] = (True, True), neighbours: int = 6,
-                 rule: str = "arclength", faces: np.ndarray | None = None):
+    def __init__(self, source, target, pairs, *, ordered: bool, closed: tuple[bool, bool],
+                 neighbours: int = 6, rule: str = "arclength",
+                 faces: np.ndarray | None = None):
         if rule not in UNMATCHED_RULES:
             raise ValueError(f"unmatched must be one of {UNMATCHED_RULES}, got {rule!r}")
+        if np.shape(closed) != (2,):
+            raise ValueError(f"closed must be a (source, target) pair of bool, got {closed!r}")
+        if faces is not None and ordered:
+            raise ValueError("faces are the target surface's: contours have none")
         self.rule = rule
         closed, target_closed = closed
         m = len(source)

@@ -42,13 +42,14 @@ _passed_lock = threading.Lock()
 def check_once(check: str, points: np.ndarray, run: Callable[[], None], *key) -> None:
     """Run ``run`` (a check of ``points`` that raises on invalid input) unless the check
     named ``check`` passed lately on the same numbers (and ``key``): a digest of the
-    points' bytes identifies them, the last :data:`PASSED_KEPT` passes are kept. An input
+    points' bytes identifies them, the :data:`PASSED_KEPT` used most recently are kept. An input
     that fails is checked again every time (and its error names the caller's argument)."""
     pts = np.ascontiguousarray(points)
     k = (check, pts.dtype.str, pts.shape, key,
          hashlib.blake2b(pts.view(np.uint8), digest_size=16).digest())
     with _passed_lock:
         if k in _passed:
+            _passed[k] = _passed.pop(k)  # the most recent last: the least recent goes
             return
     run()
     with _passed_lock:
@@ -100,7 +101,7 @@ class Shape:
         clouds, whose neighbourhoods then come from ``faces`` or nearest neighbours.
         Defaults to ``True`` in 2D and to ``False`` in 3D.
     faces : array_like of int, shape (f, 3), optional
-        Triangles of a 3D surface (indices into ``points``).
+        Triangles of a 3D surface (indices into ``points``); none (0, 3) is None.
     frame : ImageFrame, optional
         For shapes in image coordinates (read from an image or SVG): their unit,
         orientation (y down) and source image, used by the figures. None: plain
@@ -148,7 +149,7 @@ class Shape:
                 raise ShapeError(f"faces index nodes outside 0..{len(pts) - 1}")
             faces = faces.astype(np.intp)
             faces.setflags(write=False)
-            object.__setattr__(self, "faces", faces)
+            object.__setattr__(self, "faces", faces if len(faces) else None)
         if self.frame is not None and not isinstance(self.frame, ImageFrame):
             raise ShapeError(f"frame must be an ImageFrame or None, got {self.frame!r}")
         object.__setattr__(self, "contours", self._checked_contours())
@@ -172,8 +173,8 @@ class Shape:
 
     @property
     def has_faces(self) -> bool:
-        """Whether the shape is a triangle surface: ``faces`` given and not empty."""
-        return self.faces is not None and len(self.faces) > 0
+        """Whether the shape is a triangle surface (``faces`` is not None)."""
+        return self.faces is not None
 
     @property
     def m(self) -> int:

@@ -270,7 +270,8 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions,
 def _match_cloud(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
                  ) -> tuple[np.ndarray, np.ndarray, Similarity]:
     """The default matcher for unordered 3D point sets: where each source node lands
-    (:func:`_cloud_landing`; above ``FINE_CLOUD`` nodes :func:`_huge_landing`), then each
+    (:func:`_cloud_landing`; above ``FINE_CLOUD`` nodes :func:`_huge_landing`, which has
+    no affine stretch: a similarity and the refinement only), then each
     source node paired with the target node nearest to where it lands; pairs farther than
     ``sqrt(reject)`` target spacings are dropped. Cost in squared target spacings."""
     if max(src.m, tgt.m) > FINE_CLOUD:

@@ -27,6 +27,7 @@ import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
 from scipy.spatial import cKDTree
 
+from ..core.shape import even_subset
 from ..threads import blas_threads
 
 __all__ = ["refine", "stretch"]
@@ -78,7 +79,7 @@ _AVERAGE_PASSES = 4  # passes of that average (measured together with _AVERAGE)
 # spacings; even sampling as before (blob 10 000 at 180 deg 0.64, bunny 2000 0.37); from
 # the 8th nearest: uneven 1.32 and 1.87 but the even blob 0.70, p90 1.12 -> 1.60.
 _AREA_NEIGHBOURS = 32
-# The affine start (:func:`stretch`): each object summarised in about this many cubes,
+# The affine start (:func:`stretch`): each object summarised in about this many points,
 # whose dense entropic transport is annealed over _STRETCH_ROUNDS rounds from the first
 # to the second of _STRETCH_HEAT (x the target's RMS radius), _STRETCH_SINKHORN scaling
 # iterations a round. Icospheres of 162-2562 vertices onto ellipsoids of 162-2562 with
@@ -264,8 +265,10 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
 
 def stretch(z: np.ndarray, y: np.ndarray) -> np.ndarray:
     """The landings ``z`` (m, 3) of the source nodes moved by the affine map
-    that best puts them in balanced transport with the target ``y`` (n, 3), both
-    summarised in cubes weighing the nodes they hold: a least-squares fit of the
+    that best puts them in balanced transport with the target ``y`` (n, 3), each
+    summarised by the means of its nodes nearest each of ``_STRETCH_CUBES`` of them
+    spread evenly (:func:`even_subset`; their masses the node counts, so a flat or thin
+    set has as few as a round one): a least-squares fit of the
     summaries' barycentres in the plan, annealed from a wide to a narrow transport, as
     CPD's affine registration with the transport's marginals balanced. What a similarity
     cannot do, a sphere stretched onto an ellipsoid, reaches the ellipsoid's tips; where
@@ -274,8 +277,8 @@ def stretch(z: np.ndarray, y: np.ndarray) -> np.ndarray:
     def summary(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if len(p) <= _STRETCH_CUBES:
             return p, np.full(len(p), 1 / len(p))
-        width = np.prod(np.ptp(p, axis=0)) ** (1 / 3) / _STRETCH_CUBES ** (1 / 3)
-        c, mass = _means(_cells(p, width), p)
+        spread = p[even_subset(p, _STRETCH_CUBES)]
+        c, mass = _means(cKDTree(spread).query(p)[1], p)
         return c, mass / mass.sum()
 
     def lse(a: np.ndarray, axis: int) -> np.ndarray:  # log-sum-exp (scipy's: 2 x slower)
@@ -317,9 +320,9 @@ def _average(x: np.ndarray, z: np.ndarray) -> np.ndarray:
     """The landings ``z`` (m, 3) of the nodes ``x`` (m, 3) with each node's move beyond
     the best affine map (least squares) replaced by its mean over the node's ``_AVERAGE``
     nearest nodes in ``x``, ``_AVERAGE_PASSES`` times; an affine map is left exactly as
-    it is. (Beyond the best similarity, as before, the mean over a curved patch shrank a
-    stretch: a sphere of 162 nodes stretched onto an ellipsoid (2, 1, 0.5) landed 1.5,
-    not 2, along it, leaving its tips unpaired.)"""
+    it is (the mean of a stretch over a curved patch lies inside it: averaged beyond the
+    best similarity, a sphere of 162 nodes stretched onto an ellipsoid (2, 1, 0.5)
+    landed 1.5, not 2, along it, its tips unpaired)."""
     lift = np.c_[x, np.ones(len(x))]
     base = lift @ np.linalg.lstsq(lift, z, rcond=None)[0]
     k = min(_AVERAGE, len(x))
