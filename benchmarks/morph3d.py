@@ -20,6 +20,10 @@ surface of scikit-image's 3D binary blobs (the largest blob, ``marching_cubes``,
 vertices, radii (1.3, 1, 0.8), (1.5, 1, 0.7), (2, 1, 0.5)) with the true pairs and the
 matcher's.
 
+``--primitives`` morphs one shape onto another of trimesh's primitives (sphere, capsule,
+cylinder, box, cone; the target turned, scaled by 1.3 and moved): shapes unlike each
+other, beyond the warps of 5-25 % that ``match3d.py`` measures.
+
 With faces, "ab/tol" and "ba/tol" are the end shape's mean distance to the target's
 faces and the target's vertices' to the end shape's faces (the closest points on the
 triangles), in tolerances, whatever the stop test measured; "turn" the turn of the
@@ -187,15 +191,47 @@ def resolution_grid():
                       f"{crossed:>5}", flush=True)
 
 
+def _primitive(name: str):
+    """(points, faces) of one of trimesh's primitives, about 500-1500 vertices, closed."""
+    import trimesh
+
+    make = {"sphere": lambda: trimesh.creation.icosphere(3),
+            "capsule": lambda: trimesh.creation.capsule(height=2.0, radius=0.6,
+                                                        count=[24, 24]),
+            "cylinder": lambda: trimesh.creation.cylinder(0.7, 2.0, sections=32)
+            .subdivide().subdivide(),
+            "box": lambda: trimesh.creation.box([2, 1.2, 0.8]).subdivide().subdivide()
+            .subdivide().subdivide(),
+            "cone": lambda: trimesh.creation.cone(0.8, 1.6, sections=32).subdivide()
+            .subdivide()}
+    mesh = make[name]()
+    mesh.merge_vertices()
+    return np.asarray(mesh.vertices), np.asarray(mesh.faces)
+
+
+def primitive_cases():
+    """(name, source, target) of one primitive onto another, turned, scaled, moved."""
+    from scipy.spatial.transform import Rotation
+
+    turn = Rotation.from_rotvec([0.2, -0.3, 0.25])
+    cases = []
+    for a, b in (("sphere", "capsule"), ("capsule", "sphere"), ("sphere", "box"),
+                 ("box", "sphere"), ("cylinder", "capsule"), ("capsule", "cylinder"),
+                 ("sphere", "cone"), ("cone", "cylinder"), ("box", "capsule")):
+        (pa, fa), (pb, fb) = _primitive(a), _primitive(b)
+        cases.append((f"{a}->{b}", mm.Shape(pa, faces=fa),
+                      mm.Shape(turn.apply(pb) * 1.3 + [0.5, 0, 0], faces=fb)))
+    return cases
+
+
 def on_faces(result, src, tgt):
     """The end shape's mean distance to the target's faces and the target's vertices' to
     the end shape's faces, in tolerances; the pairs' turn (degrees)."""
     from modalmorph.core.align import align
-    from modalmorph.core.surfaces import closest_on_faces
+    from modalmorph.core.surfaces import face_distances
     end, pairs = np.asarray(result.shapes[-1]), result.matching.pairs
-    ab = np.linalg.norm(end - closest_on_faces(end, tgt.points, tgt.faces), axis=1).mean()
-    ba = np.linalg.norm(tgt.points - closest_on_faces(tgt.points, end, src.faces),
-                        axis=1).mean()
+    ab = face_distances(end, tgt.points, tgt.faces).mean()
+    ba = face_distances(tgt.points, end, src.faces).mean()
     turn = align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]]).angle
     return f"{ab / result.tolerance:6.2f} {ba / result.tolerance:6.2f} {turn:4.0f}"
 
@@ -223,6 +259,9 @@ def main():
     parser.add_argument("--resolutions", action="store_true",
                         help="icospheres onto ellipsoids at other resolutions, true and "
                         "matcher pairs")
+    parser.add_argument("--primitives", action="store_true",
+                        help="one of trimesh's primitives onto another, with "
+                        "self-intersections per step")
     parser.add_argument("--model-nodes", type=int, default=None,
                         help="with --surfaces: the morphs' model_nodes (default: theirs)")
     parser.add_argument("--cases", nargs="+", default=None,
@@ -236,11 +275,12 @@ def main():
     if args.resolutions:
         resolution_grid()
         return
-    if args.surfaces:
+    if args.surfaces or args.primitives:
         print(f"{'case':>20} {'source':>6} {'target':>6} {'steps':>5} {'conv':>5} "
               f"{'d/tol':>6} {'time s':>6} {'ab/tol':>6} {'ba/tol':>6} {'turn':>4}  "
               f"{'max':>5} {'steps':>5}  self-intersecting faces per step")
-        for case in surface_cases() + mesh_cases():
+        cases = primitive_cases() if args.primitives else surface_cases() + mesh_cases()
+        for case in cases:
             if args.cases is None or any(c in case[0] for c in args.cases):
                 run_surface(*case, **({} if args.model_nodes is None
                                       else {"model_nodes": args.model_nodes}))

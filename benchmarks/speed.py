@@ -40,7 +40,7 @@ from realdata import DATA, glyph_outline, heart_pairs
 from threadpoolctl import threadpool_limits
 
 import modalmorph as mm
-from modalmorph.core.shape import resample
+from modalmorph.core.shape import forget_checks, resample
 from modalmorph.datasets import load_hand
 
 FONT_PAIRS = (("DejaVu Sans", "DejaVu Serif"), ("DejaVu Sans Mono", "STIXGeneral"),
@@ -79,7 +79,9 @@ def timed(fn, repeat: int):
 
 
 def match_morph(a, b, match_cpu: list):
-    """``match`` then ``morph``; appends the CPU seconds of ``match`` to ``match_cpu``."""
+    """``match`` then ``morph``; appends the CPU seconds of ``match`` to ``match_cpu``.
+    Each run checks its objects as the first run on them does (``forget_checks``)."""
+    forget_checks()
     c = time.process_time()
     matching = mm.match(a, b)
     match_cpu.append(time.process_time() - c)
@@ -153,9 +155,14 @@ def main(argv=None):
     parser.add_argument("--reference", type=int, default=0, metavar="K",
                         help="time the dense transcription on the first K pairs per family")
     parser.add_argument("--track", action="store_true")
+    parser.add_argument("--tuned", action="store_true",
+                        help="tune glibc's allocator first, as the command line does "
+                        "(modalmorph.threads.tune_allocator); default: the library's")
     args = parser.parse_args(argv)
+    tuned = args.tuned and mm.threads.tune_allocator()
     print(f"# {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
           f"numpy {np.__version__}, modalmorph {mm.__version__}, best of {args.repeat}; "
+          f"allocator {'tuned' if tuned else 'as the library leaves it'}; "
           f"load average {os.getloadavg()[0]:.1f}")
     families = corpus(args.chars)
     print(f"{'family':>7} {'nodes':>5} {'pairs':>5} {'fail':>4}  {'wall med':>8} "

@@ -21,10 +21,10 @@ def test_neighbourhood_rule_same_in_both_passes(monkeypatch, small):
     rng = np.random.default_rng(3)
     keep = np.sort(rng.choice(120, 50, replace=False))
     pairs = np.c_[keep, keep]
-    reference = LoadTargets(a, b, pairs, ordered=True, closed=True,
+    reference = LoadTargets(a, b, pairs, ordered=True, closed=(True, True),
                             rule="mean").targets(a + 1.0)
     monkeypatch.setattr(dynamics, "_SMALL_GROUP", small)
-    got = LoadTargets(a, b, pairs, ordered=True, closed=True, rule="mean").targets(a + 1.0)
+    got = LoadTargets(a, b, pairs, ordered=True, closed=(True, True), rule="mean").targets(a + 1.0)
     assert_allclose(got, reference, rtol=1e-12)
 
 
@@ -33,7 +33,7 @@ def test_weights_are_a_weighted_mean():
     nodes between its neighbours' partners, so it lies in their bounding box."""
     a, b = _pair()
     pairs = np.c_[[0, 10], [0, 10]]
-    t = LoadTargets(a, b, pairs, ordered=True, closed=False, rule="mean").targets(a)
+    t = LoadTargets(a, b, pairs, ordered=True, closed=(False, True), rule="mean").targets(a)
     inner = t[1:10]
     box = b[1:10]
     assert np.all(inner >= box.min(axis=0) - 1e-9) and np.all(inner <= box.max(axis=0) + 1e-9)
@@ -51,7 +51,7 @@ def test_arclength_rule_spreads_a_run_along_the_target(closed):
         src = np.r_[src, np.c_[5.5 + 5.5 * np.cos(u), -6 * np.sin(u)]]
         tgt = np.r_[tgt, np.c_[11 + 11 * np.cos(u), 3 - 6 * np.sin(u)]]
         pairs = np.r_[pairs, np.c_[np.arange(12, 32), np.arange(12, 32)]]
-    t = LoadTargets(src, tgt, pairs, ordered=True, closed=closed, target_closed=closed,
+    t = LoadTargets(src, tgt, pairs, ordered=True, closed=(closed, closed),
                     rule="arclength").targets(src)
     assert_allclose(t[:12], tgt[:12], atol=1e-12)  # run 1..10 at x = 2, 4, ..., 20
 
@@ -62,7 +62,7 @@ def test_arclength_rule_backwards_round_a_closed_target():
     a, b = _pair(60)
     reversed_b = b[::-1].copy()  # source node i belongs with reversed_b[59 - i] = b[i]
     pairs = np.c_[[0, 10, 30], [59, 49, 29]]
-    t = LoadTargets(a, reversed_b, pairs, ordered=True, closed=True).targets(a)
+    t = LoadTargets(a, reversed_b, pairs, ordered=True, closed=(True, True)).targets(a)
     from scipy.spatial import cKDTree
 
     # nodes 1..9 land on b's stretch from b[0] to b[10], in order

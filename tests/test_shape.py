@@ -9,6 +9,7 @@ from numpy.testing import assert_allclose
 
 from modalmorph import Shape
 from modalmorph.core.shape import ImageFrame, resample
+from modalmorph.errors import ShapeError
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 
@@ -172,3 +173,33 @@ def test_check_contours_refuses_contours_that_cross_each_other():
     moved[40:] += [1.5, 0.0]  # the hole pokes out through the outer boundary
     with pytest.raises(ValueError, match="contour 0 crosses contour 1"):
         check_contours(ring.with_points(moved), "ring")
+
+
+def test_a_check_that_passed_is_not_run_again_and_one_that_failed_is():
+    from modalmorph.core.shape import check_once, forget_checks
+
+    runs = []
+    pts = np.random.default_rng(5).normal(size=(40, 2))
+    forget_checks()
+    for _ in range(3):
+        check_once("test", pts, lambda: runs.append(1))
+    assert len(runs) == 1
+    check_once("test", pts + 1e-12, lambda: runs.append(1))  # other numbers: run
+    check_once("test", pts, lambda: runs.append(1), "closed")  # another key: run
+    assert len(runs) == 3
+    forget_checks()
+    check_once("test", pts, lambda: runs.append(1))
+    assert len(runs) == 4
+
+    def fail():
+        runs.append(1)
+        raise ShapeError("no")
+
+    for _ in range(2):  # a failure is not remembered
+        with pytest.raises(ShapeError):
+            check_once("failing", pts, fail)
+    assert len(runs) == 6
+    bad = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.0], [0.0, 1.0]])
+    for _ in range(2):  # repeated nodes refused every time
+        with pytest.raises(ShapeError, match="repeated nodes"):
+            Shape(bad)

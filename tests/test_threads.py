@@ -51,3 +51,30 @@ def test_morph_computes_inside_the_policy(monkeypatch):
     a = np.linspace(0.0, 2.0 * np.pi, 30, endpoint=False)
     mm.morph(np.c_[np.cos(a), np.sin(a)], np.c_[2 * np.cos(a), np.sin(a)])
     assert seen == [{1}]
+
+
+def test_the_allocator_is_tuned_once_on_glibc_and_left_alone_when_asked(monkeypatch):
+    import os
+    import resource
+
+    monkeypatch.setattr(threads, "_tuned", [])
+    monkeypatch.setenv("MODALMORPH_MALLOC", "system")
+    assert threads.tune_allocator() is False
+    assert threads.tune_allocator() is False  # decided once per process
+    monkeypatch.setattr(threads, "_tuned", [])
+    monkeypatch.delenv("MODALMORPH_MALLOC")
+    try:
+        glibc = bool(os.confstr("CS_GNU_LIBC_VERSION"))
+    except (ValueError, OSError):
+        glibc = False
+    assert threads.tune_allocator() is glibc
+    if glibc:  # five 2 MB temporaries freed together are reused, not fresh pages each
+        # time (untuned: 40 000 minor page faults in these 20 rounds, tuned 0)
+        def work():
+            return sum(block.sum() for block in [np.ones(1 << 18) for _ in range(5)])
+
+        work()
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+        for _ in range(20):
+            work()
+        assert resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before < 1000

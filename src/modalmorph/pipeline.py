@@ -164,7 +164,7 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
         sim = Simulation(work, tgt, pairs, options, matching.contours)
         run = sim.run(progress).result()
     crossed = None
-    if src.dim == 3 and src.faces is not None and len(src.faces):
+    if src.dim == 3 and src.has_faces:
         crossed = step_self_intersections(run.shapes, src.faces)
     turn = None
     if crossed is not None and np.any(crossed) and not options.remove_rigid:

@@ -25,6 +25,7 @@ from ..figures import plot_matches
 from ..io import atomic_output_dir, atomic_write
 from ..matching import match
 from ..options import MatchOptions, ReadOptions, StanceOptions, StrainOptions, flat_fields
+from ..threads import tune_allocator
 from ..version import __version__
 from . import batch, strain
 from . import stance as stance_app
@@ -77,6 +78,7 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # argparse: --help, --version (0) or a usage error (2)
         return int(exc.code or 0)
+    tune_allocator()  # the process is ours: keep freed memory for reuse (modalmorph.threads)
     fresh = not logging.getLogger().handlers  # else a host (pytest) owns the logging
     if fresh:  # others' warnings, our information; log lines name flags, as errors do
         logging.basicConfig(level=logging.WARNING, format="%(message)s")

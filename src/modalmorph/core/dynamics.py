@@ -74,20 +74,34 @@ class LoadTargets:
         Nodes in one common frame.
     pairs : ndarray of int, shape (K, 2)
         Matched (source, target) indices.
-    ordered, closed : bool
-        Topology of the source (and target) contour.
+    ordered : bool
+        Whether the objects are contours (else point sets or surfaces).
+    closed : tuple of bool
+        Whether the source and the target contours are closed.
     neighbours : int
         Number of matched neighbours for unordered objects (in 3D, where they are
         fitted by an affine map, at least ``AFFINE_CARRIERS``).
     rule : {"arclength", "mean"}
         The rule for unmatched nodes of a contour (above).
+    faces : ndarray of int, shape (f, 3), optional
+        The target's triangles, for a 3D point set or surface: its carried nodes are
+        pulled to the closest point of them to where their neighbours carry them, on the
+        target's surface, not off it between its vertices (a sphere of 642 vertices onto
+        an ellipsoid of 162 with the true pairs stopped 1.7 tolerances off its faces,
+        converged on them, method.md §5).
     """
 
-    def __init__(self, source, target, pairs, *, ordered: bool, closed: bool,
-                 target_closed: bool = True, neighbours: int = 6, rule: str = "arclength"):
+    def __init__(self, source, target, pairs, *, ordered: bool, closed: tuple[bool, bool],
+                 neighbours: int = 6, rule: str = "arclength",
+                 faces: np.ndarray | None = None):
         if rule not in UNMATCHED_RULES:
             raise ValueError(f"unmatched must be one of {UNMATCHED_RULES}, got {rule!r}")
+        if np.shape(closed) != (2,):
+            raise ValueError(f"closed must be a (source, target) pair of bool, got {closed!r}")
+        if faces is not None and ordered:
+            raise ValueError("faces are the target surface's: contours have none")
         self.rule = rule
+        closed, target_closed = closed
         m = len(source)
         self.source = source
         self.target = target
@@ -114,6 +128,9 @@ class LoadTargets:
             nb = idx_matched[np.asarray(nb).reshape(len(un), k)]
             self._groups = [("carry", un, nb)]
         self._flatten()
+        if faces is not None:
+            self._fixed = [(nodes, closest_on_faces(at, target, faces))
+                           for nodes, at in self._fixed]
 
     @property
     def pairs(self) -> np.ndarray:
@@ -247,16 +264,6 @@ class LoadTargets:
                 self._fixed.append((nodes, self.source[nodes] + self._carried(nodes, cand,
                                                                               disp)))
 
-    def onto_faces(self, faces: np.ndarray) -> LoadTargets:
-        """Pull the carried nodes of a 3D point set or surface to the closest point of the
-        target's triangles ``faces`` (f, 3) to where their neighbours carry them: on the
-        target's surface, not off it between its vertices (a sphere of 642 vertices onto
-        an ellipsoid of 162 with the true pairs stopped 1.7 tolerances off its faces,
-        converged on them, method.md §5). Returns ``self``."""
-        self._fixed = [(nodes, closest_on_faces(at, self.target, faces))
-                       for nodes, at in self._fixed]
-        return self
-
     def _carried(self, nodes: np.ndarray, cand: np.ndarray, disp: np.ndarray) -> np.ndarray:
         """The displacement (b, d) of ``nodes`` carried by their matched neighbours
         ``cand`` (b, k), whose displacements are ``disp`` (b, k, d): in 3D, of 4 or more,
@@ -380,8 +387,7 @@ class ContourLoads:
             if inside.any():
                 local = pairs[inside] - [rk.start, rj.start]
                 self.parts.append((rk, rj, LoadTargets(
-                    source[rk], target[rj], local, ordered=True, closed=closed[0],
-                    target_closed=closed[1], rule=rule)))
+                    source[rk], target[rj], local, ordered=True, closed=closed, rule=rule)))
         if not self.parts:
             raise ValueError("no pair joins partner contours: nothing pulls the source")
         self.partners = np.array([[rows.index(rk), cols.index(rj)]

@@ -27,6 +27,7 @@ from .shape import as_shape
 __all__ = ["DEFAULT_SIGMA", "AUTO_CONDITION", "MAX_CONDITION", "MIN_SIGMA", "MAX_SIGMA",
            "DEFAULT_CUTOFF", "AUTO_DENSE_MAX_DOF", "auto_sigma", "check_sigma",
            "cutoff_radius", "gaussian", "gram_entries", "squared_norms", "stiffness_entries",
+           "stiffness_matrix",
            "stiffness_components", "stiffness_component_pairs", "self_entries",
            "gaussian_from_overlap", "condition_bound",
            "auto_sigma_condition", "singular_gram"]
@@ -134,6 +135,20 @@ def stiffness_entries(r: np.ndarray, sigma: float, lam: float, mu: float, *,
     return np.moveaxis(out, (0, 1), (-2, -1))
 
 
+def stiffness_matrix(r: np.ndarray, sigma: float, lam: float, mu: float, *,
+                     r2: np.ndarray | None = None, gamma: np.ndarray | None = None
+                     ) -> np.ndarray:
+    """The dense stiffness in the Gaussian basis, ``K_g`` (dm, dm), component-major (7),
+    for the offsets ``r`` (m, m, d) of all node pairs: the entries of
+    :func:`stiffness_entries`, each block evaluated in place where it lies (no (m, m, d, d)
+    array and no transposed copy of it; bitwise the same numbers)."""
+    m, d = r.shape[0], r.shape[-1]
+    pairs = [(a, b) for a in range(d) for b in range(d)]
+    out = np.empty((d, m, d, m))
+    _stiffness(r, sigma, lam, mu, pairs, r2, gamma, out=out)
+    return out.reshape(d * m, d * m)
+
+
 def self_entries(sigma: float, d: int, lam: float, mu: float) -> tuple[float, float]:
     """``(K_g^aa_ii, Gamma_ii)``: the stiffness and the mass (without rho) of one node and
     one component in the Gaussian basis, the diagonal entries at offset 0,
@@ -145,8 +160,10 @@ def self_entries(sigma: float, d: int, lam: float, mu: float) -> tuple[float, fl
 
 def _stiffness(r: np.ndarray, sigma: float, lam: float, mu: float,
                pairs: list[tuple[int, int]], r2: np.ndarray | None = None,
-               gamma: np.ndarray | None = None) -> tuple[list[np.ndarray], np.ndarray]:
-    """``[K_g^ab for (a, b) in pairs]`` and ``Gamma`` for offsets ``r`` (..., d).
+               gamma: np.ndarray | None = None, out: np.ndarray | None = None
+               ) -> tuple[list[np.ndarray], np.ndarray]:
+    """``[K_g^ab for (a, b) in pairs]`` and ``Gamma`` for offsets ``r`` (..., d); with
+    ``out`` (d, m, d, m) for offsets (m, m, d), each block is written to ``out[a, :, b]``.
 
     Every ``(a, b)`` is evaluated as written, ``(-(lambda + mu) / 4 r_a) r_b``: ``K^ab``
     and ``K^ba`` may differ in the last bit, as they always have (the multilevel solver's
@@ -158,14 +175,16 @@ def _stiffness(r: np.ndarray, sigma: float, lam: float, mu: float,
     scale = gamma / sigma**4
     diag = (lam + mu) * sigma**2 / 2 + mu * (d * sigma**2 / 2 - r2 / 4)
     del r2
-    out = []
+    blocks = []
     for a, b in pairs:
-        v = (-(lam + mu) / 4) * r[..., a] * r[..., b]
+        v = None if out is None else out[a, :, b]
+        v = np.multiply(-(lam + mu) / 4, r[..., a], out=v)
+        v *= r[..., b]
         if a == b:
             v += diag
         v *= scale
-        out.append(v)
-    return out, gamma
+        blocks.append(v)
+    return blocks, gamma
 
 
 def cutoff_radius(sigma: float, cutoff: float = DEFAULT_CUTOFF) -> float:

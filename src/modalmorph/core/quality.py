@@ -13,7 +13,7 @@ from scipy.spatial import cKDTree
 
 from ..errors import ShapeError
 from .align import align
-from .shape import resample
+from .shape import check_once, resample
 
 __all__ = ["Polyline", "area", "check_contours", "correspondence_rotation",
            "curve_distances", "roughness", "self_crossings", "crossing_segments", "LOOP_AREA",
@@ -281,7 +281,13 @@ def check_simple(points, name: str, closed: bool = True) -> None:
 def check_contours(shape, name: str) -> None:
     """:func:`check_simple` on every contour of a 2D ordered :class:`Shape`, and no
     contour crossing another (a ring's hole must stay inside it): ShapeError naming the
-    two contours and where they cross."""
+    two contours and where they cross. Checked once for the same points and topology
+    (:func:`~modalmorph.core.shape.check_once`: a morph after a match of one pair)."""
+    check_once("contours", shape.points, lambda: _check_contours(shape, name),
+               shape.closed, shape.contours)
+
+
+def _check_contours(shape, name: str) -> None:
     if len(shape.sizes) == 1:
         check_simple(shape.points, name, shape.closed)
         return

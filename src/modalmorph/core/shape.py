@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import hashlib
+import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -10,9 +13,9 @@ from scipy.spatial import cKDTree
 
 from ..errors import ShapeError
 
-__all__ = ["ImageFrame", "Shape", "as_shape", "check_pairs", "coarsen", "even_subset",
-           "resample", "share", "spread_indices", "GRID_ROUNDS", "HUGE", "FPS_POOL",
-           "FPS_TREE"]
+__all__ = ["ImageFrame", "Shape", "as_shape", "check_pairs", "check_once", "forget_checks",
+           "coarsen", "even_subset", "resample", "share", "spread_indices", "GRID_ROUNDS",
+           "HUGE", "FPS_POOL", "FPS_TREE", "PASSED_KEPT"]
 
 # Two nodes closer than this fraction of the object's RMS radius are "the same node".
 _REPEAT_TOL = 1e-9
@@ -29,6 +32,30 @@ FPS_POOL = 20  # its candidates per point chosen (§7)
 # 600: 10 -> 13 ms); the same points either way.
 FPS_TREE = 1000
 _BALL_MARGIN = 1.0 + 1e-9  # the ball's radius widened past rounding (relative)
+# Checks passed that are remembered (check_once): the objects of a few calls (match then
+# morph of one pair validate the same two; a pair's checks cost 0.3-0.5 ms at 70 nodes).
+PASSED_KEPT = 32
+_passed: dict = {}  # check_once's keys, oldest first
+_passed_lock = threading.Lock()
+
+
+def check_once(check: str, points: np.ndarray, run: Callable[[], None], *key) -> None:
+    """Run ``run`` (a check of ``points`` that raises on invalid input) unless the check
+    named ``check`` passed lately on the same numbers (and ``key``): a digest of the
+    points' bytes identifies them, the :data:`PASSED_KEPT` used most recently are kept. An input
+    that fails is checked again every time (and its error names the caller's argument)."""
+    pts = np.ascontiguousarray(points)
+    k = (check, pts.dtype.str, pts.shape, key,
+         hashlib.blake2b(pts.view(np.uint8), digest_size=16).digest())
+    with _passed_lock:
+        if k in _passed:
+            _passed[k] = _passed.pop(k)  # the most recent last: the least recent goes
+            return
+    run()
+    with _passed_lock:
+        _passed[k] = None
+        while len(_passed) > PASSED_KEPT:
+            del _passed[next(iter(_passed))]
 
 
 @dataclass(frozen=True)
@@ -74,7 +101,7 @@ class Shape:
         clouds, whose neighbourhoods then come from ``faces`` or nearest neighbours.
         Defaults to ``True`` in 2D and to ``False`` in 3D.
     faces : array_like of int, shape (f, 3), optional
-        Triangles of a 3D surface (indices into ``points``).
+        Triangles of a 3D surface (indices into ``points``); none (0, 3) is None.
     frame : ImageFrame, optional
         For shapes in image coordinates (read from an image or SVG): their unit,
         orientation (y down) and source image, used by the figures. None: plain
@@ -122,7 +149,7 @@ class Shape:
                 raise ShapeError(f"faces index nodes outside 0..{len(pts) - 1}")
             faces = faces.astype(np.intp)
             faces.setflags(write=False)
-            object.__setattr__(self, "faces", faces)
+            object.__setattr__(self, "faces", faces if len(faces) else None)
         if self.frame is not None and not isinstance(self.frame, ImageFrame):
             raise ShapeError(f"frame must be an ImageFrame or None, got {self.frame!r}")
         object.__setattr__(self, "contours", self._checked_contours())
@@ -143,6 +170,11 @@ class Shape:
             raise ShapeError(f"contours must be node counts of at least {least} summing to "
                              f"the {self.m} nodes, got {sizes.tolist()}")
         return None if len(sizes) == 1 else tuple(int(k) for k in sizes)
+
+    @property
+    def has_faces(self) -> bool:
+        """Whether the shape is a triangle surface (``faces`` is not None)."""
+        return self.faces is not None
 
     @property
     def m(self) -> int:
@@ -258,6 +290,13 @@ def _contour_edges(start: int, stop: int, closed: bool) -> np.ndarray:
     return np.c_[i, j]
 
 
+def forget_checks() -> None:
+    """Forget the checks :func:`check_once` remembers (a benchmark times each call as the
+    first one on its objects)."""
+    with _passed_lock:
+        _passed.clear()
+
+
 def _validate_points(points, name: str) -> np.ndarray:
     if np.iscomplexobj(points):
         raise ShapeError(f"{name} must be real coordinates, got complex numbers")
@@ -269,6 +308,12 @@ def _validate_points(points, name: str) -> np.ndarray:
         raise ShapeError(f"{name} must have shape (m, 2) or (m, 3), got {pts.shape}")
     if pts.shape[0] < 3:
         raise ShapeError(f"{name} must have at least 3 nodes, got {pts.shape[0]}")
+    check_once("points", pts, lambda: _check_values(pts, name))
+    return pts
+
+
+def _check_values(pts: np.ndarray, name: str) -> None:
+    """Refuse non-finite or huge coordinates, a point, repeated nodes."""
     bad = ~np.isfinite(pts).all(axis=1)
     if bad.any():
         raise ShapeError(f"{name} has non-finite coordinates (NaN or inf) at node(s) "
@@ -287,7 +332,6 @@ def _validate_points(points, name: str) -> np.ndarray:
         i, j = pairs[0]
         raise ShapeError(f"{name} has repeated nodes: node {i} and node {j} coincide "
                          f"({len(pairs)} repeated pair(s) in all)")
-    return pts
 
 
 def as_shape(obj, name: str = "shape") -> Shape:

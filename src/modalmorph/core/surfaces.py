@@ -37,11 +37,23 @@ BLOCK = 1 << 12  # points at once (x FACE_CANDIDATES faces): 35 MB peak for 100 
 TURN_HINT = 90.0
 
 
+def face_tree(vertices, faces) -> cKDTree:
+    """A k-d tree of a triangle surface's face centroids, for :func:`closest_on_faces`
+    and :func:`face_distances` called several times on one surface."""
+    return cKDTree(np.asarray(vertices, dtype=np.float64)[np.asarray(faces)].mean(axis=1))
+
+
+def face_distances(points, vertices, faces, tree: cKDTree | None = None) -> np.ndarray:
+    """The distance (p,) of every point to a triangle surface (:func:`closest_on_faces`)."""
+    points = np.asarray(points, dtype=np.float64)
+    return np.linalg.norm(points - closest_on_faces(points, vertices, faces, tree), axis=1)
+
+
 def closest_on_faces(points, vertices, faces, tree: cKDTree | None = None) -> np.ndarray:
     """The closest point (p, 3) of a triangle surface to every point (Ericson's
     closest point on a triangle, over the ``FACE_CANDIDATES`` faces whose centroids are
-    nearest). ``tree``: a :class:`~scipy.spatial.cKDTree` of the faces' centroids, when
-    one is kept for several calls."""
+    nearest). ``tree``: :func:`face_tree` of the surface, when one is kept for several
+    calls."""
     points = np.asarray(points, dtype=np.float64)
     tri = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]  # (f, 3, 3)
     if tree is None:

@@ -139,7 +139,8 @@ def check_frames(frames):
 
 def describe(shape, name: str):
     """(points (m, d), closed, ordered, faces, sizes) of a Shape-like object or a bare
-    array; ``sizes`` are the node counts of its contours (``None``: one contour)."""
+    array; ``faces`` None unless it is a triangle surface; ``sizes`` are the node counts
+    of its contours (``None``: one contour)."""
     if hasattr(shape, "points"):
         pts = np.asarray(shape.points, dtype=np.float64)
         faces = getattr(shape, "faces", None)
@@ -153,13 +154,14 @@ def describe(shape, name: str):
         raise ValueError(f"{name} must have shape (m, 2) or (m, 3), got {pts.shape}")
     if ordered is None:
         ordered = pts.shape[1] == 2
-    return pts, closed, bool(ordered), None if faces is None else np.asarray(faces), sizes
+    faces = np.asarray(faces) if faces is not None and len(faces) else None
+    return pts, closed, bool(ordered), faces, sizes
 
 
 def edges_of(m: int, closed: bool, ordered: bool, faces, sizes=None) -> np.ndarray:
     """Node pairs (e, 2) to draw: each contour (of ``sizes`` nodes, in row order; none
     joining one contour to the next), the mesh edges, or none for a point cloud."""
-    if faces is not None and len(faces):
+    if faces is not None:
         e = np.vstack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
         return np.unique(np.sort(e, axis=1), axis=0)
     if ordered:

@@ -162,7 +162,7 @@ class _Scene:
         self.shapes, self.last = shapes, len(shapes) - 1
         self.names = getattr(morph, "names", None)
         self.dt = getattr(getattr(morph, "options", None), "dt", None)
-        self.faces = faces if faces is not None and len(faces) else None
+        self.faces = faces
         self.edges = edges_of(shapes.shape[1], closed, ordered, None, sizes)
         self.values = np.zeros(shapes.shape[:2]) if color_by is None else \
             node_values(morph, color_by)

@@ -211,13 +211,13 @@ def plot_shapes(morph, *, color_by="energy", every: int = 1, frames: str = "time
     lines = _step_lines(ax, shapes, values, drawn, edges if contour else None)
     lines.set(cmap=cmap, norm=norm)
     ax.add_collection(lines)
-    if faces is not None and len(faces):
+    if faces is not None:
         _draw_surface(ax, shapes[-1], faces, values[-1] if color_by else None, cmap, norm)
     elif not contour:  # the final cloud's nodes, coloured by their value
         ax.scatter(*shapes[-1].T, c=values[-1], cmap=cmap, norm=norm, s=14, zorder=3,
                    linewidths=0)
     t_line = _draw_ends(ax, morph.target, shapes[0], tgt)
-    kind = "contour" if contour else "surface" if faces is not None and len(faces) else "cloud"
+    kind = "contour" if contour else "cloud" if faces is None else "surface"
     _shapes_legend(ax, morph, cmap(0.75), kind, color_by, t_line)
     colorbar(ax, lines, color_by, unit=view.unit, scale=scale)
     finish_axes(ax, np.vstack([shapes.reshape(-1, shapes.shape[2]), tgt]), view, image=image)

@@ -132,7 +132,7 @@ def _document(shapes: np.ndarray, source, fps: float, name: str) -> tuple[dict, 
 
 def _mode(source) -> int:
     """The primitive mode of the source's topology."""
-    if source.faces is not None and len(source.faces):
+    if source.has_faces:
         return _TRIANGLES
     if source.ordered and len(source.sizes) > 1:
         return _LINES  # several contours: no segment from one to the next

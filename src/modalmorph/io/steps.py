@@ -63,7 +63,7 @@ def write_step_meshes(morph, out_dir, *, fmt: str = "ply", name: str = "morph") 
 
 def _cells(source, fmt: str) -> list:
     """meshio cells of the source's topology in this format (int32: what PLY holds)."""
-    if source.faces is not None and len(source.faces):
+    if source.has_faces:
         return [("triangle", np.asarray(source.faces, dtype=np.int32))]
     if source.ordered and fmt == "ply":  # each contour's segments, none between them
         return [("line", np.asarray(source.edges, dtype=np.int32))]

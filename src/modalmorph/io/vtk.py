@@ -74,7 +74,7 @@ def write_vtk_series(morph, out_dir, *, name: str = "morph") -> Path:
 
 def _vtk_cells(source, m: int) -> list:
     """meshio cells of the source's topology: triangles, lines or vertices."""
-    if source.faces is not None and len(source.faces):
+    if source.has_faces:
         return [("triangle", np.asarray(source.faces, dtype=np.int64))]
     if source.ordered:  # each contour's segments (the shape's edges), none between them
         return [("line", np.asarray(source.edges, dtype=np.int64))]

@@ -58,7 +58,7 @@ from ..errors import OptionError, ShapeError
 from ..options import METHODS, ROTATIONS, MatchOptions
 from ..threads import blas_threads, limit
 from .alternation import Placement, alternate, fits, keep_or_turn
-from .clouds import refine
+from .clouds import refine, stretch
 from .coherent import settle
 from .contours import keep_partners, match_contours
 from .features import (
@@ -122,6 +122,13 @@ MAX_AFFINITY = 4e7  # largest m x n affinity the paper's searches build (memory;
 # 500 points, pose vs alternation (1000 twisted: the alternation kept): cow uneven and cut
 # at 30 deg, after refine 4.38 -> 0.95, 1.74 -> 0.24 spacings; blob uneven 180 deg 3.06 -> 2.09.
 _GAP_TRIM = 2.0
+# The affine start of a 3D point set (clouds.stretch) is kept where it brings the surfaces
+# closer than this x the pose's two-way gap (surface_gap, capped at _GAP_TRIM spacings).
+# Icospheres of 162-2562 vertices onto ellipsoids (1.3-2 x as long as thick): 0.11-0.42;
+# benchmarks/match3d.py at 1000 points (airplane, bone, cow cut; blob, torus, twisted
+# uneven; bunny, twisted base): 0.95-4.1 (a part cut away pulls the balanced transport's
+# affine map out of shape: airplane cut 30 deg 0.35 -> 5.19 spacings had it been kept).
+_STRETCH_GAIN = 0.5
 _REJECT = 16.0  # pairs costing more are dropped: 4 target spacings (not measured)
 
 
@@ -277,7 +284,8 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions,
 def _match_cloud(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
                  ) -> tuple[np.ndarray, np.ndarray, Similarity]:
     """The default matcher for unordered 3D point sets: where each source node lands
-    (:func:`_cloud_landing`; above ``FINE_CLOUD`` nodes :func:`_huge_landing`), then each
+    (:func:`_cloud_landing`; above ``FINE_CLOUD`` nodes :func:`_huge_landing`, which has
+    no affine stretch: a similarity and the refinement only), then each
     source node paired with the target node nearest to where it lands; pairs farther than
     ``sqrt(reject)`` target spacings are dropped. Cost in squared target spacings."""
     if max(src.m, tgt.m) > FINE_CLOUD:
@@ -294,11 +302,17 @@ def _match_cloud(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
 
 def _cloud_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> np.ndarray:
     """Where each source node of a 3D point set lands on the target (the target's
-    normalised frame), (m, 3): :func:`_coarse_landing`, then
-    :func:`modalmorph.matching.clouds.refine`, from ``REFINE_COARSER`` times coarser."""
+    normalised frame), (m, 3): :func:`_coarse_landing`, stretched by
+    :func:`~modalmorph.matching.clouds.stretch` where that brings the surfaces
+    ``_STRETCH_GAIN`` times closer, then :func:`modalmorph.matching.clouds.refine`, from
+    ``REFINE_COARSER`` times coarser."""
     landed, start = _coarse_landing(src, tgt, n_modes, opts)
-    return refine(src.normalized, tgt.to_normalized(landed), tgt.normalized,
-                  start // REFINE_COARSER)
+    z, y = tgt.to_normalized(landed), tgt.normalized
+    stretched, trim, tree = stretch(z, y), _GAP_TRIM * tgt.spacing, cKDTree(y)
+    if surface_gap(stretched, y, trim, tree=tree) < _STRETCH_GAIN * surface_gap(
+            z, y, trim, tree=tree):
+        z = stretched
+    return refine(src.normalized, z, y, start // REFINE_COARSER)
 
 
 def _coarse_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions

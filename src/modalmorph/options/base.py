@@ -57,7 +57,10 @@ class Options:
         pass
 
     def replace(self, **changes):
-        """A copy with some options changed (validated); unknown names are refused."""
+        """A copy with some options changed (validated); unknown names are refused. No
+        changes: this object itself (frozen, already validated)."""
+        if not changes:
+            return self
         known = {f.name for f in fields(self)}
         unknown = sorted(set(changes) - known)
         if unknown:

@@ -268,13 +268,10 @@ def _loads(source: Shape, target: Shape, X1, Y, pairs, o: MorphOptions, partners
     """Where every node is pulled (19)-(20): :class:`LoadTargets`, or per pair of partner
     contours (:class:`ContourLoads`)."""
     if not several(source, target):
-        loads = LoadTargets(X1, Y, pairs, ordered=bool(source.ordered), closed=source.closed,
-                            target_closed=target.closed, neighbours=o.neighbours,
-                            rule=o.unmatched)
-        if target.dim == 3 and not source.ordered and target.faces is not None \
-                and len(target.faces):  # carried onto the target's surface (method.md §5)
-            loads.onto_faces(target.faces)
-        return loads
+        onto = target.dim == 3 and not source.ordered and target.has_faces
+        return LoadTargets(X1, Y, pairs, ordered=bool(source.ordered),
+                           closed=(source.closed, target.closed), neighbours=o.neighbours,
+                           rule=o.unmatched, faces=target.faces if onto else None)
     if partners is None:
         partners = contour_partners(source.contour_of, target.contour_of, pairs)
     return ContourLoads(X1, Y, pairs, slices=(source.slices, target.slices),
