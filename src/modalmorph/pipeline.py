@@ -42,7 +42,7 @@ import numpy as np
 from .core.align import Similarity, align
 from .core.quality import check_contours
 from .core.shape import Shape, as_shape
-from .core.surfaces import intersection_sentence, step_self_intersections
+from .core.surfaces import intersection_sentence, step_self_intersections, unlike_sentence
 from .errors import MorphDivergedError, OptionError, ShapeError
 from .matching import Matching, match
 from .matching.contours import unpaired_sentence
@@ -173,6 +173,8 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
                                  turn=turn)
     if sim.system.partners is not None:
         said += _unpaired(src, tgt, sim.system.partners)
+    if src.dim == 3 and not src.ordered and not run.converged:
+        said += unlike_sentence(pairs, src.m, tgt.m)
     fields = {**vars(run), "message": run.message + said}
     return Morph(**fields, matching=matching, similarity=similarity, source=src,
                  target=tgt, options=options, match_options=match_options,

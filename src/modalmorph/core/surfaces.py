@@ -16,8 +16,9 @@ import logging
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["FACE_CANDIDATES", "TURN_HINT", "closest_on_faces", "self_intersecting_faces",
-           "step_self_intersections", "intersection_sentence"]
+__all__ = ["FACE_CANDIDATES", "DISTINCT_PARTNERS", "TURN_HINT", "closest_on_faces",
+           "face_distances", "face_tree", "self_intersecting_faces",
+           "step_self_intersections", "intersection_sentence", "unlike_sentence"]
 
 log = logging.getLogger(__name__)
 
@@ -35,6 +36,12 @@ BLOCK = 1 << 12  # points at once (x FACE_CANDIDATES faces): 35 MB peak for 100 
 # by the matcher's pairs (turned 169 deg from the common frame), cut 19-71 faces at a step
 # and none with the turn removed first.
 TURN_HINT = 90.0
+# Below this share of distinct partners (of the fewer nodes of the two objects) a morph
+# that falls short is said to join objects too unlike for the matcher. benchmarks/
+# morph3d.py: the real meshes, warped and turned, 0.95-1.00 (the skimage blobs 0.95), an
+# icosphere onto an ellipsoid at another resolution 1.00; trimesh's primitives onto one
+# another (--primitives; none converges) 0.21-0.56, but sphere <-> box 0.83-0.89.
+DISTINCT_PARTNERS = 0.75
 
 
 def face_tree(vertices, faces) -> cKDTree:
@@ -139,6 +146,18 @@ def step_self_intersections(shapes, faces) -> np.ndarray | None:
         return None
     return np.array([self_intersecting_faces(shape, faces) for shape in shapes],
                     dtype=np.int64)
+
+
+def unlike_sentence(pairs: np.ndarray, m: int, n: int) -> str:
+    """What a 3D morph's message adds when its pairs reach fewer distinct target nodes
+    than ``DISTINCT_PARTNERS`` of the smaller node count (``m`` source, ``n`` target
+    nodes): the objects are likely too unlike for the matcher; '' otherwise."""
+    distinct, fewer = len(np.unique(pairs[:, 1])), min(m, n)
+    if distinct >= DISTINCT_PARTNERS * fewer:
+        return ""
+    return (f"; the pairs reach only {distinct} distinct target nodes of {fewer}: the "
+            f"objects may be too unlike for the matcher, which follows one shape warped by "
+            f"up to a quarter of its size")
 
 
 def intersection_sentence(counts, *, model_nodes: int | None = None,
