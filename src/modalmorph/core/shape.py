@@ -35,15 +35,16 @@ _BALL_MARGIN = 1.0 + 1e-9  # the ball's radius widened past rounding (relative)
 # Checks passed that are remembered (check_once): the objects of a few calls (match then
 # morph of one pair validate the same two; a pair's checks cost 0.3-0.5 ms at 70 nodes).
 PASSED_KEPT = 32
-_passed: dict = {}  # check_once's keys, oldest first
+_passed: dict = {}  # check_once's keys, the least recently used first
 _passed_lock = threading.Lock()
 
 
 def check_once(check: str, points: np.ndarray, run: Callable[[], None], *key) -> None:
     """Run ``run`` (a check of ``points`` that raises on invalid input) unless the check
     named ``check`` passed lately on the same numbers (and ``key``): a digest of the
-    points' bytes identifies them, the :data:`PASSED_KEPT` used most recently are kept. An input
-    that fails is checked again every time (and its error names the caller's argument)."""
+    points' bytes identifies them, and the :data:`PASSED_KEPT` used most recently are
+    kept. An input that fails is checked again every time (and its error names the
+    caller's argument)."""
     pts = np.ascontiguousarray(points)
     k = (check, pts.dtype.str, pts.shape, key,
          hashlib.blake2b(pts.view(np.uint8), digest_size=16).digest())

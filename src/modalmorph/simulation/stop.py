@@ -254,9 +254,8 @@ def choose_stop_test(source: Shape, target: Shape, target_n: np.ndarray,
         return CurveStop(limits, target_n, closed=source.closed,
                          target_closed=target.closed, m=source.m)
     if source.dim == 3 and min(source.m, target.m) > PLANE:
-        return SurfaceStop(limits, target_n, m=source.m,
-                           faces=target.faces if target.has_faces else None,
-                           source_faces=source.faces if source.has_faces else None)
+        return SurfaceStop(limits, target_n, m=source.m, faces=target.faces,
+                           source_faces=source.faces)
     return PairStop(limits)
 
 
