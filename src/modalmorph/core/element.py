@@ -136,14 +136,23 @@ def stiffness_entries(r: np.ndarray, sigma: float, lam: float, mu: float, *,
 
 
 def stiffness_matrix(r: np.ndarray, sigma: float, lam: float, mu: float, *,
-                     r2: np.ndarray | None = None, gamma: np.ndarray | None = None
-                     ) -> np.ndarray:
+                     r2: np.ndarray | None = None, gamma: np.ndarray | None = None,
+                     order: str = "C") -> np.ndarray:
     """The dense stiffness in the Gaussian basis, ``K_g`` (dm, dm), component-major (7),
     for the offsets ``r`` (m, m, d) of all node pairs: the entries of
     :func:`stiffness_entries`, each block evaluated in place where it lies (no (m, m, d, d)
-    array and no transposed copy of it; bitwise the same numbers)."""
+    array and no transposed copy of it; bitwise the same numbers). ``order="F"``: the
+    same numbers laid out in Fortran order (LAPACK's), written as the C-ordered transpose
+    from the transposed offsets (``r_ji`` is ``r_ij`` read the other way round; ``r2`` and
+    ``gamma`` are exactly symmetric)."""
     m, d = r.shape[0], r.shape[-1]
     pairs = [(a, b) for a in range(d) for b in range(d)]
+    if order == "F":  # out[b, j, a, i] = K^ab_ij: the C view of a Fortran (dm, dm) array
+        full = np.empty((d * m, d * m), order="F")
+        _stiffness(r.transpose(1, 0, 2), sigma, lam, mu, pairs,
+                   None if r2 is None else r2.T, None if gamma is None else gamma.T,
+                   out=full.T.reshape(d, m, d, m), swap=True)
+        return full
     out = np.empty((d, m, d, m))
     _stiffness(r, sigma, lam, mu, pairs, r2, gamma, out=out)
     return out.reshape(d * m, d * m)
@@ -160,10 +169,11 @@ def self_entries(sigma: float, d: int, lam: float, mu: float) -> tuple[float, fl
 
 def _stiffness(r: np.ndarray, sigma: float, lam: float, mu: float,
                pairs: list[tuple[int, int]], r2: np.ndarray | None = None,
-               gamma: np.ndarray | None = None, out: np.ndarray | None = None
-               ) -> tuple[list[np.ndarray], np.ndarray]:
+               gamma: np.ndarray | None = None, out: np.ndarray | None = None,
+               swap: bool = False) -> tuple[list[np.ndarray], np.ndarray]:
     """``[K_g^ab for (a, b) in pairs]`` and ``Gamma`` for offsets ``r`` (..., d); with
-    ``out`` (d, m, d, m) for offsets (m, m, d), each block is written to ``out[a, :, b]``.
+    ``out`` (d, m, d, m) for offsets (m, m, d), each block is written to ``out[a, :, b]``
+    (``swap``: to ``out[b, :, a]``).
 
     Every ``(a, b)`` is evaluated as written, ``(-(lambda + mu) / 4 r_a) r_b``: ``K^ab``
     and ``K^ba`` may differ in the last bit, as they always have (the multilevel solver's
@@ -177,7 +187,7 @@ def _stiffness(r: np.ndarray, sigma: float, lam: float, mu: float,
     del r2
     blocks = []
     for a, b in pairs:
-        v = None if out is None else out[a, :, b]
+        v = None if out is None else out[b, :, a] if swap else out[a, :, b]
         v = np.multiply(-(lam + mu) / 4, r[..., a], out=v)
         v *= r[..., b]
         if a == b:
