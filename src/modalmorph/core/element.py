@@ -147,11 +147,11 @@ def stiffness_matrix(r: np.ndarray, sigma: float, lam: float, mu: float, *,
     ``gamma`` are exactly symmetric)."""
     m, d = r.shape[0], r.shape[-1]
     pairs = [(a, b) for a in range(d) for b in range(d)]
-    if order == "F":  # out[b, j, a, i] = K^ab_ij: the C view of a Fortran (dm, dm) array
+    if order == "F":  # K^ab_ij to [b, j, a, i] of the C view of a Fortran (dm, dm) array
         full = np.empty((d * m, d * m), order="F")
         _stiffness(r.transpose(1, 0, 2), sigma, lam, mu, pairs,
                    None if r2 is None else r2.T, None if gamma is None else gamma.T,
-                   out=full.T.reshape(d, m, d, m), swap=True)
+                   out=full.T.reshape(d, m, d, m).transpose(2, 1, 0, 3))
         return full
     out = np.empty((d, m, d, m))
     _stiffness(r, sigma, lam, mu, pairs, r2, gamma, out=out)
@@ -169,11 +169,10 @@ def self_entries(sigma: float, d: int, lam: float, mu: float) -> tuple[float, fl
 
 def _stiffness(r: np.ndarray, sigma: float, lam: float, mu: float,
                pairs: list[tuple[int, int]], r2: np.ndarray | None = None,
-               gamma: np.ndarray | None = None, out: np.ndarray | None = None,
-               swap: bool = False) -> tuple[list[np.ndarray], np.ndarray]:
+               gamma: np.ndarray | None = None, out: np.ndarray | None = None
+               ) -> tuple[list[np.ndarray], np.ndarray]:
     """``[K_g^ab for (a, b) in pairs]`` and ``Gamma`` for offsets ``r`` (..., d); with
-    ``out`` (d, m, d, m) for offsets (m, m, d), each block is written to ``out[a, :, b]``
-    (``swap``: to ``out[b, :, a]``).
+    ``out`` (d, m, d, m) for offsets (m, m, d), each block is written to ``out[a, :, b]``.
 
     Every ``(a, b)`` is evaluated as written, ``(-(lambda + mu) / 4 r_a) r_b``: ``K^ab``
     and ``K^ba`` may differ in the last bit, as they always have (the multilevel solver's
@@ -187,7 +186,7 @@ def _stiffness(r: np.ndarray, sigma: float, lam: float, mu: float,
     del r2
     blocks = []
     for a, b in pairs:
-        v = None if out is None else out[b, :, a] if swap else out[a, :, b]
+        v = None if out is None else out[a, :, b]
         v = np.multiply(-(lam + mu) / 4, r[..., a], out=v)
         v *= r[..., b]
         if a == b:
