@@ -15,13 +15,15 @@ runs after one warm-up, in wall-clock seconds and in CPU seconds of this process
 (``time.process_time``: on a busy machine the wall clock counts the time other work
 held the cores, the CPU time does not). A row per family and size: pairs, median, 90th
 percentile and worst; also the median and worst CPU seconds of ``match`` alone (best of
-the same runs). ``--reference K`` also times the dense transcription of the paper
-(``morph.py``: G inverted, ``eigh(K, M)``, the affinity (8), the same Newmark steps) on
-the first K pairs of each family at each size, and prints the speed-up (reference /
-match + morph, CPU seconds, both on one BLAS thread; median and worst over those
-pairs). ``--track`` times ``modalmorph.track`` (default options, then
-``reference="first"``) on the 20 contours of SC-HF-NI-03 resampled to 250 nodes. The
-load average is printed first and last.
+the same runs), and the median over the family of each pair's median minor page faults a
+run (``resource.getrusage``; glibc hands freed memory back at the top of its heap, and
+fresh pages cost ~1.7 us each to fault in: issue 22). ``--reference K`` also times the
+dense transcription of the paper (``morph.py``: G inverted, ``eigh(K, M)``, the
+affinity (8), the same Newmark steps) on the first K pairs of each family at each size,
+and prints the speed-up (reference / match + morph, CPU seconds, both on one BLAS
+thread; median and worst over those pairs). ``--track`` times ``modalmorph.track``
+(default options, then ``reference="first"``) on the 20 contours of SC-HF-NI-03
+resampled to 250 nodes. The load average is printed first and last.
 
     PYTHONPATH=src python benchmarks/speed.py [--sizes 70 250 1000] [--repeat 3]
         [--reference 3] [--track]
@@ -32,6 +34,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import resource
 import time
 
 import numpy as np
@@ -66,15 +69,23 @@ def corpus(chars: str) -> dict[str, list[tuple[str, np.ndarray, np.ndarray]]]:
             "glyphs": glyphs}
 
 
-def timed(fn, repeat: int):
-    """Best wall and CPU seconds of ``repeat`` runs after a warm-up, and the last result."""
+def _faults() -> int:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+
+
+def timed(fn, repeat: int, faults: list | None = None):
+    """Best wall and CPU seconds of ``repeat`` runs after a warm-up, and the last result;
+    appends the median minor page faults of a run to ``faults``."""
     out = fn()
-    wall, cpu = [], []
+    wall, cpu, flt = [], [], []
     for _ in range(repeat):
-        w, c = time.perf_counter(), time.process_time()
+        f, w, c = _faults(), time.perf_counter(), time.process_time()
         out = fn()
         wall.append(time.perf_counter() - w)
         cpu.append(time.process_time() - c)
+        flt.append(_faults() - f)
+    if faults is not None:
+        faults.append(np.median(flt))
     return min(wall), min(cpu), out
 
 
@@ -106,13 +117,13 @@ def distribution(values) -> str:
 
 
 def run_size(family: str, pairs, n: int, repeat: int, n_reference: int) -> str:
-    walls, cpus, matches, ratios, failed = [], [], [], [], 0
+    walls, cpus, matches, ratios, faults, failed = [], [], [], [], [], 0
     for k, (_, a, b) in enumerate(pairs):
         a, b = resample(a, n), resample(b, n)
         match_cpu = []
         try:
             wall, cpu, (matching, result) = timed(
-                lambda a=a, b=b, t=match_cpu: match_morph(a, b, t), repeat)
+                lambda a=a, b=b, t=match_cpu: match_morph(a, b, t), repeat, faults)
         except ValueError:  # a glyph outline the library refuses (it says why)
             failed += 1
             continue
@@ -125,8 +136,9 @@ def run_size(family: str, pairs, n: int, repeat: int, n_reference: int) -> str:
              else f"{'-':>7} {'-':>7}")
     match = (f"{np.median(matches):>8.4f} {max(matches):>8.4f}" if matches
              else f"{'-':>8} {'-':>8}")
+    flt = f"{np.median(faults):>7.0f}" if faults else f"{'-':>7}"
     return (f"{family:>7} {n:>5} {len(walls):>5} {failed:>4}  {distribution(walls)}  "
-            f"{distribution(cpus)}  {match}  {speed}")
+            f"{distribution(cpus)}  {match}  {speed}  {flt}")
 
 
 def run_track(repeat: int) -> str:
@@ -167,7 +179,7 @@ def main(argv=None):
     families = corpus(args.chars)
     print(f"{'family':>7} {'nodes':>5} {'pairs':>5} {'fail':>4}  {'wall med':>8} "
           f"{'wall p90':>8} {'wall max':>8}  {'CPU med':>8} {'CPU p90':>8} {'CPU max':>8}  "
-          f"{'match med':>8} {'match max':>8}  {'ref/ours':>7} {'worst':>7}")
+          f"{'match med':>8} {'match max':>8}  {'ref/ours':>7} {'worst':>7}  {'faults':>7}")
     for n in args.sizes:
         for family in args.families:
             print(run_size(family, families[family], n, args.repeat, args.reference),

@@ -11,6 +11,7 @@ from modalmorph.core.element import (
     stiffness_component_pairs,
     stiffness_components,
     stiffness_entries,
+    stiffness_matrix,
 )
 
 from .conftest import sphere_points
@@ -68,6 +69,19 @@ def test_stiffness_components_are_the_entries(d, rng):
         assert np.array_equal(v, blocks[:, a, b])  # the same operations
         assert_allclose(v, blocks[:, b, a], rtol=1e-15)  # K^ab = K^ba up to the last bit
     assert np.array_equal(gamma, gram_entries(r, 0.7)[1])
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_stiffness_matrix_in_fortran_order_is_the_same_numbers(d, rng):
+    """K_g laid out for LAPACK (written from the transposed offsets) holds bit for bit the
+    numbers of the C-ordered one, block (a, b) and (b, a) alike (they differ in the last
+    bit from each other, not between the layouts)."""
+    x = rng.standard_normal((40, d))
+    r = x[None, :, :] - x[:, None, :]
+    c = stiffness_matrix(r, 0.7, 2.0, 1.5)
+    f = stiffness_matrix(r, 0.7, 2.0, 1.5, order="F")
+    assert f.flags.f_contiguous and c.flags.c_contiguous
+    assert np.array_equal(c, f)
 
 
 @pytest.mark.parametrize("d", [2, 3])

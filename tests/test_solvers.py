@@ -99,3 +99,29 @@ def test_dense_routes(hand200, n):
     all modes sliced above) return the lowest n."""
     model = FEModel(hand200)
     assert_allclose(model.modes(n).frequencies, model.modes().frequencies[:n], rtol=1e-9)
+
+
+def test_whitening_in_place_is_the_whole_array_expression(hand200, rng):
+    """The dense solver whitens K_g in its own Fortran array and symmetrises it tile by
+    tile: bit for bit ``(W^T K_g W + (W^T K_g W)^T) / 2`` made with whole arrays, and the
+    cached K_g is left as it was."""
+    from scipy.linalg import blas
+
+    from modalmorph.core.solvers.dense import symmetrize, whitened
+
+    A = rng.standard_normal((301, 301))
+    want = (A + A.T) / 2
+    symmetrize(A, tile=64)
+    assert np.array_equal(A, want)
+    model = FEModel(hand200)
+    K = model.stiffness_gaussian.copy()
+    _, l_inv, Kw = whitened(model)
+    assert Kw.flags.f_contiguous and np.array_equal(model.stiffness_gaussian, K)
+    d, m = model.dim, model.m
+    W = np.array(K, order="F")
+    for b in range(d):
+        W[:, b * m:(b + 1) * m] = blas.dtrmm(1.0, l_inv, W[:, b * m:(b + 1) * m], side=1,
+                                             lower=1, trans_a=1)
+    for a in range(d):
+        W[a * m:(a + 1) * m] = blas.dtrmm(1.0, l_inv, W[a * m:(a + 1) * m], lower=1)
+    assert np.array_equal(Kw, (W + W.T) / 2)

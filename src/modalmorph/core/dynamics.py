@@ -490,9 +490,11 @@ class Newmark:
         a2, a3 = 1 / (al * dt), 1 / (2 * al) - 1
         a4, a5 = de / al - 1, dt / 2 * (de / al - 2)
         object.__setattr__(self, "coefficients", (a0, a1, a2, a3, a4, a5))
-        K_eff = self.K.copy()  # left side of (15), K + a0 I + a1 C, in that order
-        K_eff.flat[::n + 1] += a0
-        K_eff += a1 * self.C
+        # left side of (15), (K + a0 I) + a1 C in that order, made in one (n, n) array:
+        # a1 C + K off the diagonal (the same sums), the diagonal redone in that order
+        K_eff = np.multiply(a1, self.C, order="F")
+        K_eff += self.K
+        K_eff.flat[::n + 1] = (np.diagonal(self.K) + a0) + a1 * np.diagonal(self.C)
         # K_eff is SPD and well conditioned (a0 I dominates for small steps): factorised
         # once, each step solves with the factor (two triangular solves, as cheap as a
         # product with an inverse; forming the inverse cost 2x the factor at 500 modes)

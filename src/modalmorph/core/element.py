@@ -136,14 +136,23 @@ def stiffness_entries(r: np.ndarray, sigma: float, lam: float, mu: float, *,
 
 
 def stiffness_matrix(r: np.ndarray, sigma: float, lam: float, mu: float, *,
-                     r2: np.ndarray | None = None, gamma: np.ndarray | None = None
-                     ) -> np.ndarray:
+                     r2: np.ndarray | None = None, gamma: np.ndarray | None = None,
+                     order: str = "C") -> np.ndarray:
     """The dense stiffness in the Gaussian basis, ``K_g`` (dm, dm), component-major (7),
     for the offsets ``r`` (m, m, d) of all node pairs: the entries of
     :func:`stiffness_entries`, each block evaluated in place where it lies (no (m, m, d, d)
-    array and no transposed copy of it; bitwise the same numbers)."""
+    array and no transposed copy of it; bitwise the same numbers). ``order="F"``: the
+    same numbers laid out in Fortran order (LAPACK's), written as the C-ordered transpose
+    from the transposed offsets (``r_ji`` is ``r_ij`` read the other way round; ``r2`` and
+    ``gamma`` are exactly symmetric)."""
     m, d = r.shape[0], r.shape[-1]
     pairs = [(a, b) for a in range(d) for b in range(d)]
+    if order == "F":  # K^ab_ij to [b, j, a, i] of the C view of a Fortran (dm, dm) array
+        full = np.empty((d * m, d * m), order="F")
+        _stiffness(r.transpose(1, 0, 2), sigma, lam, mu, pairs,
+                   None if r2 is None else r2.T, None if gamma is None else gamma.T,
+                   out=full.T.reshape(d, m, d, m).transpose(2, 1, 0, 3))
+        return full
     out = np.empty((d, m, d, m))
     _stiffness(r, sigma, lam, mu, pairs, r2, gamma, out=out)
     return out.reshape(d * m, d * m)

@@ -256,6 +256,17 @@ class FEModel:
         return stiffness_matrix(self._offsets, self.width, lam, mu, r2=self._r2,
                                 gamma=self.gram[1])
 
+    def stiffness_gaussian_work(self) -> np.ndarray:
+        """A fresh dense ``K_g`` (dm, dm) in Fortran order, the caller's to overwrite (an
+        eigensolver's whitening works in it): :attr:`stiffness_gaussian`'s numbers, copied
+        when that is kept, else made and not kept (one (dm, dm) array a model fewer)."""
+        if "stiffness_gaussian" in self.__dict__:
+            return np.array(self.stiffness_gaussian, order="F")
+        self._check_dense("K_g")
+        lam, mu = self.lame
+        return stiffness_matrix(self._offsets, self.width, lam, mu, r2=self._r2,
+                                gamma=self.gram[1], order="F")
+
     # -- sparse model: pairs within the cutoff radius ----------------------------------
 
     @cached_property

@@ -313,7 +313,8 @@ class ElementBasis:
         self.L, self.l_inv, Kw = whitened(model)
         rho = model.material.rho
         self.scale, self.root = 1.0 / np.sqrt(rho), np.sqrt(rho)
-        self._stiffness = Kw / rho
+        Kw /= rho  # whitened's own array: no second (n, n) one
+        self._stiffness = Kw
 
     @property
     def n(self) -> int:

@@ -217,9 +217,10 @@ def _source_part(source: Shape, o: MorphOptions) -> dict:
     kappa, spring = springs(field, k_abs, consistent=o.loads == "consistent"
                             and (spread is None or fitted))
     fit = _gram_factor(field) if fitted else None
-    K_mod = stiffness + (spring if o.scheme == "implicit" else 0.0)
+    K_mod = _loaded(stiffness, kappa, spring) if o.scheme == "implicit" else stiffness
     uniform = kappa is not None and o.scheme == "implicit"  # K_mod = K_el + kappa I
-    newmark = Newmark(K_mod, damping_matrix(o.damping, K_mod, spring, uniform=uniform),
+    newmark = Newmark(K_mod, damping_matrix(o.damping, K_mod, _mean(kappa, spring, field.n),
+                                            uniform=uniform),
                       o.dt / w_ref, o.alpha, o.delta)
     return dict(reduced=reduced, model=model, n_modes=n_modes, basis=basis,
                 field=field, spread=spread, k_ref=k_ref,
@@ -341,31 +342,47 @@ def similarity_free_full(K: np.ndarray, B: np.ndarray) -> np.ndarray:
     root = np.sqrt(np.clip(lam, 0.0, None))
     keep = root > max(RANK_TOL, np.sqrt(len(lam) * np.finfo(float).eps)) * root.max()
     Z = KB @ (V[:, keep] / root[keep])
-    return K - Z @ Z.T  # exactly symmetric: K is, and Z Z^T is one syrk
+    out = Z @ Z.T  # one syrk: exactly symmetric, as K is
+    return np.subtract(K, out, out=out)  # K - Z Z^T, no second (n, n) array
 
 
 def springs(field, k_abs: float, *, consistent: bool):
     """The springs (19) in modal coordinates, ``(kappa, spring matrix)``: nodal,
     ``Phi^T R = k Phi^T (T - X)`` (kappa None); consistent, ``kappa x_T`` with ``x_T``
     the modes' fit of ``T - X`` and ``kappa`` their mean stiffness (the trace of
-    ``Phi^T Phi`` is the sum of the squares of ``Phi``: the product itself is not formed)."""
+    ``Phi^T Phi`` is the sum of the squares of ``Phi``: the product itself is not formed),
+    the matrix ``kappa I`` then not formed either (None)."""
     if consistent:  # x_T = Phi^T M (T - X)
-        n = field.n
-        kappa = k_abs * field.sq_norm() / n
-        return kappa, kappa * np.eye(n)
+        return k_abs * field.sq_norm() / field.n, None
     return None, k_abs * field.gram()
 
 
-def damping_matrix(damping, K_mod: np.ndarray, spring: np.ndarray, *,
+def _loaded(stiffness: np.ndarray, kappa: float | None, spring) -> np.ndarray:
+    """The loaded stiffness ``K_el + spring``, or ``K_el + kappa I`` (its diagonal lifted:
+    the same numbers without the identity)."""
+    if kappa is None:
+        return stiffness + spring
+    K_mod = stiffness.copy()
+    K_mod.flat[::len(K_mod) + 1] += kappa
+    return K_mod
+
+
+def _mean(kappa: float | None, spring, n: int) -> float:
+    """The springs' mean modal stiffness, the trace of the spring matrix over ``n``
+    (``kappa I``'s summed as ``np.trace`` sums it: bitwise the same)."""
+    return float((np.trace(spring) if kappa is None else np.full(n, kappa).sum()) / n)
+
+
+def damping_matrix(damping, K_mod: np.ndarray, spring_mean: float, *,
                    uniform: bool = False) -> np.ndarray:
     """``C_mod = a I + b K_mod`` (5) on the loaded model, by one of the two rules.
 
     ``damping=(xi_1, xi_2)``: the paper's, the ratios at the loaded model's lowest and
     highest frequencies (:func:`~modalmorph.rayleigh`). ``damping=xi``: ``b = 2 xi / w_s``
-    with ``w_s^2`` the springs' mean modal stiffness, so that a mode of loaded frequency
-    ``w >= w_s`` has the ratio ``xi w / w_s``: overdamped modes then creep towards the
-    target at nearly one rate (``~1 / b``), and the shape moves along nearly straight
-    paths, with no mode racing ahead (ripples, folds); ``a`` lifts the softest loaded
+    with ``w_s^2`` the springs' mean modal stiffness (``spring_mean``), so that a mode of
+    loaded frequency ``w >= w_s`` has the ratio ``xi w / w_s``: overdamped modes then creep
+    towards the target at nearly one rate (``~1 / b``), and the shape moves along nearly
+    straight paths, with no mode racing ahead (ripples, folds); ``a`` lifts the softest loaded
     mode to ``xi`` when it lies below ``w_s`` (method.md §4). ``uniform``: ``K_mod`` is a
     positive semi-definite elastic stiffness plus ``spring = w_s^2 I`` (consistent springs
     in the effective stiffness), so no loaded mode lies below ``w_s``, ``a`` is 0 and the
@@ -373,7 +390,7 @@ def damping_matrix(damping, K_mod: np.ndarray, spring: np.ndarray, *,
     """
     n = len(K_mod)
     if np.ndim(damping) == 0:  # every mode approaches at nearly the springs' one rate
-        xi, w_s = float(damping), np.sqrt(np.trace(spring) / n)
+        xi, w_s = float(damping), np.sqrt(spring_mean)
         b = 2 * xi / w_s
         if uniform:  # K_mod = K_el + w_s^2 I, K_el >= 0: w_lo >= w_s, so a = 0
             return b * K_mod
