@@ -336,12 +336,14 @@ def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndar
         i, j = even_subset(x, CHOICE_NODES), even_subset(y, CHOICE_NODES * len(y) // len(x))
     if cube_levels(len(j), start) == 0:  # no level before the nodes': nothing to compare
         return refine(x, z, y, start)
-    starts = (z, align(x, z).apply(x))
-    yj = y[j]
-    tree, trim = cKDTree(yj), _GAP_TRIM * cKDTree(yj).query(yj, k=2)[0][:, 1].mean()
+    starts, yj = (z, align(x, z).apply(x)), y[j]
+    tree = cKDTree(yj)
+    trim = _GAP_TRIM * tree.query(yj, k=2)[0][:, 1].mean()
     firsts = [refine(x[i], s[i], yj, start, levels=1) for s in starts]
     best = int(np.argmin([surface_gap(f, yj, trim, tree=tree) for f in firsts]))
-    z = starts[best] + _carried(x[i], firsts[best] - starts[best][i], x, 1.0)
+    z = firsts[best]
+    if len(i) < len(x):  # the subset's first level carried to every node
+        z = starts[best] + _carried(x[i], z - starts[best][i], x, 1.0)
     return refine(x, z, y, 4 * start)  # from its second level on: cubes half as wide
 
 
