@@ -58,7 +58,7 @@ from ..errors import OptionError, ShapeError
 from ..options import METHODS, ROTATIONS, MatchOptions
 from ..threads import blas_threads, limit
 from .alternation import Placement, alternate, fits, keep_or_turn
-from .clouds import refine, stretch
+from .clouds import cube_levels, refine, stretch
 from .coherent import settle
 from .contours import keep_partners, match_contours
 from .features import (
@@ -129,6 +129,12 @@ _GAP_TRIM = 2.0
 # uneven; bunny, twisted base): 0.95-4.1 (a part cut away pulls the balanced transport's
 # affine map out of shape: airplane cut 30 deg 0.35 -> 5.19 spacings had it been kept).
 _STRETCH_GAIN = 0.5
+# Source nodes above which the two starts of refine (_refined) are tried on even subsets of
+# about this many nodes, the first level's moves then carried to every node. Blob, 100 000
+# points at 30/90/180 deg, gap after the first level from the similarity / from the
+# landings: subsets of 1000-4000 nodes 0.98-1.02 (180 deg wrong), 10 000 0.99/0.97/0.96
+# (median 0.84/0.93/0.87 spacings, main 0.85/1.11/1.22; 15.0-15.3 CPU-s, main 15.0-15.7).
+CHOICE_NODES = 10_000
 _REJECT = 16.0  # pairs costing more are dropped: 4 target spacings (not measured)
 
 
@@ -305,14 +311,40 @@ def _cloud_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> 
     normalised frame), (m, 3): :func:`_coarse_landing`, stretched by
     :func:`~modalmorph.matching.clouds.stretch` where that brings the surfaces
     ``_STRETCH_GAIN`` times closer, then :func:`modalmorph.matching.clouds.refine`, from
-    ``REFINE_COARSER`` times coarser."""
+    ``REFINE_COARSER`` times coarser, from those landings or from their best similarity
+    alone (:func:`_refined`)."""
     landed, start = _coarse_landing(src, tgt, n_modes, opts)
     z, y = tgt.to_normalized(landed), tgt.normalized
     stretched, trim, tree = stretch(z, y), _GAP_TRIM * tgt.spacing, cKDTree(y)
     if surface_gap(stretched, y, trim, tree=tree) < _STRETCH_GAIN * surface_gap(
             z, y, trim, tree=tree):
         z = stretched
-    return refine(src.normalized, z, y, start // REFINE_COARSER)
+    return _refined(src.normalized, z, y, start // REFINE_COARSER)
+
+
+def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndarray:
+    """:func:`~modalmorph.matching.clouds.refine` of the landings ``z`` (m, 3) of the
+    source nodes ``x`` on the target ``y`` (normalised frames) from whichever of two
+    starts lies nearer the target's surface after refine's first level
+    (:func:`~modalmorph.matching.pose.surface_gap`, capped at ``_GAP_TRIM`` spacings):
+    ``z`` as it is, or its best similarity alone, without the deformation the coarse
+    match gave it (carried from coarse nodes, that can hold the refinement away from the
+    truth: blob, 100 000 points, 90 deg). Above ``CHOICE_NODES`` source nodes both are
+    tried on even subsets of both objects."""
+    i, j = np.arange(len(x)), np.arange(len(y))
+    if len(x) > CHOICE_NODES:  # as wide cubes: an even subset's spacing grows as its count falls
+        i, j = even_subset(x, CHOICE_NODES), even_subset(y, CHOICE_NODES * len(y) // len(x))
+    if cube_levels(len(j), start) == 0:  # no level before the nodes': nothing to compare
+        return refine(x, z, y, start)
+    starts, yj = (z, align(x, z).apply(x)), y[j]
+    tree = cKDTree(yj)
+    trim = _GAP_TRIM * tree.query(yj, k=2)[0][:, 1].mean()
+    firsts = [refine(x[i], s[i], yj, start, levels=1) for s in starts]
+    best = int(np.argmin([surface_gap(f, yj, trim, tree=tree) for f in firsts]))
+    z = firsts[best]
+    if len(i) < len(x):  # the subset's first level carried to every node
+        z = starts[best] + _carried(x[i], z - starts[best][i], x, 1.0)
+    return refine(x, z, y, 4 * start)  # from its second level on: cubes half as wide
 
 
 def _coarse_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions

@@ -30,7 +30,7 @@ from scipy.spatial import cKDTree
 from ..core.shape import even_subset
 from ..threads import blas_threads
 
-__all__ = ["refine", "stretch"]
+__all__ = ["refine", "stretch", "cube_levels"]
 
 _ROUNDS = 3  # transport and smoothing rounds of the last level, the nodes (not measured)
 _FEW = 0.25  # a level with fewer cubes than this x the source nodes is cheap: more rounds
@@ -264,6 +264,15 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
             return _average(x, z)
         if level == levels:
             return z
+
+
+def cube_levels(n: int, start: int) -> int:
+    """How many levels of cubes :func:`refine` runs on a target of ``n`` nodes from a
+    coarse match of ``start`` nodes before the level of the nodes themselves."""
+    width, levels = np.sqrt(n / max(start, 1)), 0  # in target spacings, as refine's
+    while (width := max(width / _STEP, 1.0)) > 1.0:
+        levels += 1
+    return levels
 
 
 def stretch(z: np.ndarray, y: np.ndarray) -> np.ndarray:
