@@ -544,6 +544,27 @@ def test_mesh_quads_and_point_cloud(tmp_path):
         read_shape(tmp_path / "cloud.vtk", nodes=5)
 
 
+def test_mesh_files_meshio_refuses(tmp_path):
+    """A range scanner's PLY (a ``camera`` element beside the vertices and faces: MeshLab's
+    range maps) and a textured OBJ (fewer texture coordinates than vertices) are valid
+    files meshio refuses: they read as the surfaces they hold."""
+    points, faces = _icosphere()
+    header = ["ply", "format ascii 1.0", "element camera 1", "property float view_px",
+              "property float view_py", f"element vertex {len(points)}", "property float x",
+              "property float y", "property float z", f"element face {len(faces)}",
+              "property list uchar int vertex_indices", "end_header", "0.5 0.5"]
+    rows = [" ".join(f"{v:.9g}" for v in p) for p in points] + [
+        "3 " + " ".join(map(str, f)) for f in faces]
+    (tmp_path / "scan.ply").write_text("\n".join(header + rows) + "\n")
+    _same_surface(read_shape(tmp_path / "scan.ply"), points, faces, atol=1e-6)
+
+    uv = ["vt 0 0", "vt 1 0", "vt 0 1"]  # three texture coordinates for every vertex
+    lines = [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in points] + uv + [
+        "f " + " ".join(f"{i + 1}/{k + 1}" for k, i in enumerate(f)) for f in faces]
+    (tmp_path / "textured.obj").write_text("\n".join(lines) + "\n")
+    _same_surface(read_shape(tmp_path / "textured.obj"), points, faces, atol=1e-6)
+
+
 def test_mesh_unreadable(tmp_path):
     path = tmp_path / "junk.ply"
     path.write_text("this is not a ply file\n")

@@ -1,5 +1,9 @@
 """Meshes, read with meshio: a 3D triangle surface or, with no surface cells, a point cloud.
 
+PLY and OBJ files that meshio refuses but graphics software writes (a PLY with further
+elements, such as a range scanner's ``camera``; an OBJ with fewer texture coordinates than
+vertices) are read with trimesh, the graphics library, instead.
+
 Quads and polygons are split into triangles (a fan from their first corner); points no
 triangle uses and exactly repeated points are dropped, and so are the triangles that
 become degenerate. A mesh with no surface cells is a point cloud of all its points.
@@ -21,6 +25,8 @@ from .base import RawShape
 
 __all__ = ["read_mesh"]
 
+GRAPHICS_FORMATS = (".ply", ".obj")  # read with trimesh where meshio refuses them
+
 
 def read_mesh(path: Path, name: str, options: ReadOptions) -> RawShape:
     """A mesh file's triangle surface, or its points (see the module's docstring); its
@@ -31,9 +37,13 @@ def read_mesh(path: Path, name: str, options: ReadOptions) -> RawShape:
         raise ImportError(f"reading meshes needs meshio ({exc}); install it with: "
                           f"pip install 'modalmorph[mesh]'") from None
     _check_mesh_header(path.read_bytes(), name, path.suffix.lower())
-    mesh = _meshio_read(meshio, path, name)
-    points = np.asarray(mesh.points, dtype=np.float64)
-    triangles = _triangles(mesh)
+    try:
+        mesh = _meshio_read(meshio, path, name)
+        points, triangles = np.asarray(mesh.points, dtype=np.float64), _triangles(mesh)
+    except InputFileError as refused:
+        if path.suffix.lower() not in GRAPHICS_FORMATS:
+            raise
+        points, triangles = _trimesh_read(path, refused)
     if points.ndim != 2 or len(points) == 0:
         raise InputFileError(f"{name}: the mesh has no points")
     if not triangles:  # no surface: a point cloud
@@ -59,6 +69,22 @@ def _meshio_read(meshio, path: Path, name: str):
     if said.getvalue().strip():
         warnings.warn(f"{name}: meshio: {' '.join(said.getvalue().split())}", stacklevel=4)
     return mesh
+
+
+def _trimesh_read(path: Path, refused: InputFileError) -> tuple[np.ndarray, list]:
+    """The points and triangles of a PLY or OBJ file as trimesh reads it; ``refused``,
+    meshio's error, where trimesh finds no points either."""
+    try:
+        import trimesh
+
+        loaded = trimesh.load(path, force="mesh", process=False, skip_materials=True)
+        points = np.asarray(loaded.vertices, dtype=np.float64).reshape(-1, 3)
+        faces = np.asarray(getattr(loaded, "faces", ()), dtype=np.intp).reshape(-1, 3)
+    except Exception:  # trimesh raises many types for a bad file
+        raise refused from None
+    if len(points) == 0:
+        raise refused from None
+    return points, [faces] if len(faces) else []
 
 
 def _triangles(mesh) -> list:
