@@ -5,6 +5,7 @@ import os
 import re
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -251,6 +252,30 @@ def test_svg_circle_ellipse_rect_and_viewbox(tmp_path):
                     'viewBox="0 0 100 50"><rect x="10" y="20" width="30" height="10"/></svg>')
     shape = read_shape(path, nodes=80)
     assert _dist_to_polygon(shape.points, verts).max() < 1e-9
+
+
+@pytest.mark.parametrize("before, passed", [
+    ('<path d="M0 0h200v200H0z" fill="none"/>', 1),  # an icon's box (Material icons)
+    ('<rect width="200" height="200" style="fill:#ffffff"/>', 1),  # a page's background
+    ('<rect width="200" height="200" style="fill:none;opacity:0"/>'  # matplotlib's
+     '<path d="M 20 20 L 180 20 L 180 180 Z" style="fill:#000;opacity:0"/>', 2),
+    ('<rect x="90" y="90" width="5" height="5" fill="red"/>', 0),  # drawn: read
+])
+def test_svg_passes_over_what_does_not_show(tmp_path, before, passed):
+    """The outline read is the first that shows: not one drawn invisibly, nor a first
+    one covering the page while others follow; what was passed over is said."""
+    body = before + '<circle cx="100" cy="100" r="40"/>'
+    path = tmp_path / "page.svg"
+    path.write_text('<svg xmlns="http://www.w3.org/2000/svg" width="200" height="200">'
+                    f"{body}</svg>")
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        shape = read_shape(path)
+    on_circle = np.allclose(np.linalg.norm(shape.points - 100, axis=1), 40, rtol=1e-4)
+    assert on_circle == (passed > 0)
+    notes = [str(w.message) for w in said if "passed over" in str(w.message)]
+    assert notes == ([f"{path}: passed over {passed} outline(s) drawn invisibly or as the "
+                      "page's background"] if passed else [])
 
 
 @pytest.mark.parametrize("body, message", [

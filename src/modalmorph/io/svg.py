@@ -1,7 +1,10 @@
 """SVG drawings: the first outline drawn, sampled uniformly by arc length.
 
 The first ``<path>``, ``<polygon>``, ``<polyline>``, ``<circle>``, ``<ellipse>`` or
-``<rect>`` drawn (not in ``<defs>``; transforms applied), read with svgelements. A path of
+``<rect>`` drawn (not in ``<defs>``; transforms applied), read with svgelements. Outlines
+drawn invisibly (no fill and no stroke, or opacity 0: an icon's bounding box, a figure's
+transparent background) and a first outline that covers the whole page while others
+follow (a background) are passed over, with a warning. A path of
 several subpaths (a glyph "o" or "B", a ring: an outline and its holes) gives a shape of
 as many contours, in the order drawn. Closed if every subpath ends with ``Z``, is a
 polygon, circle, ellipse or rect, or ends where it starts; a path mixing closed and open
@@ -12,6 +15,7 @@ scaling), y pointing down (:data:`SVG_FRAME`).
 from __future__ import annotations
 
 import os
+import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -32,6 +36,10 @@ SVG_SAMPLES = 128
 SVG_FRAME = ImageFrame(unit="SVG user units")
 
 
+# A background covers the page to within this fraction of its size (matplotlib writes its
+# figure's patch exactly on the page, to 1e-13 relative).
+PAGE_TOLERANCE = 1e-6
+
 # The outlines read from an SVG, in document order; svgelements gives <circle>, <ellipse>
 # and <rect> as paths too.
 _SVG_TAGS = ("path", "polygon", "polyline", "circle", "ellipse", "rect")
@@ -50,11 +58,7 @@ def read_svg(path: Path, name: str, options: ReadOptions) -> RawShape:
         raise InputFileError(f"{name}: not a valid SVG (XML) file: {exc}") from None
     if not isinstance(svg, se.SVG):
         raise InputFileError(f"{name}: not an SVG file (its root element is not <svg>)")
-    kinds = tuple(getattr(se, tag.capitalize()) for tag in _SVG_TAGS)
-    element = next((e for e in svg.elements() if isinstance(e, kinds)), None)  # not <defs>
-    if element is None:
-        raise InputFileError(f"{name}: no {', '.join(f'<{t}>' for t in _SVG_TAGS[:-1])} or "
-                             f"<{_SVG_TAGS[-1]}> element")
+    element = _first_outline(se, svg, name)
     tag = type(element).__name__.lower()
     _check_svg_source(se, element, f"{name}: <{tag}>")
     if svg.viewbox is not None:  # back from the viewport to the file's user units
@@ -73,6 +77,51 @@ def read_svg(path: Path, name: str, options: ReadOptions) -> RawShape:
     return RawShape(np.vstack(pts), closed=closed.pop(), frame=SVG_FRAME,
                     default_nodes=DEFAULT_NODES,
                     contours=tuple(map(len, pts)) if len(pts) > 1 else None)
+
+
+def _first_outline(se, svg, name: str):
+    """The first outline drawn that shows (see the module's docstring)."""
+    kinds = tuple(getattr(se, tag.capitalize()) for tag in _SVG_TAGS)
+    drawn = [e for e in svg.elements() if isinstance(e, kinds)]  # not <defs>
+    if not drawn:
+        raise InputFileError(f"{name}: no {', '.join(f'<{t}>' for t in _SVG_TAGS[:-1])} or "
+                             f"<{_SVG_TAGS[-1]}> element")
+    shown = [e for e in drawn if _shows(e)] or drawn  # nothing shows: the first drawn
+    if len(shown) > 1 and _covers_page(svg, shown[0]):
+        shown = shown[1:]
+    if shown[0] is not drawn[0]:
+        skipped = drawn.index(shown[0])
+        warnings.warn(f"{name}: passed over {skipped} outline(s) drawn invisibly or as the "
+                      f"page's background", stacklevel=4)
+    return shown[0]
+
+
+def _shows(element) -> bool:
+    """Whether an outline is drawn visibly: some opacity, and a fill or a stroke."""
+    values = element.values
+    if values.get("visibility") == "hidden" or values.get("display") == "none":
+        return False
+    try:
+        if float(values.get("opacity", 1.0)) <= 0:
+            return False
+    except ValueError:
+        pass  # an opacity that is not a number: as browsers, ignored
+
+    def paints(color) -> bool:
+        return color is not None and color.value is not None and color.alpha > 0
+
+    width = element.stroke_width or 0.0
+    return paints(element.fill) or (paints(element.stroke) and width > 0)
+
+
+def _covers_page(svg, element) -> bool:
+    """Whether an outline's bounding box covers the whole page (a background)."""
+    box = element.bbox()
+    if box is None or not svg.width or not svg.height:
+        return False
+    tol = PAGE_TOLERANCE * max(svg.width, svg.height)
+    x0, y0, x1, y1 = box
+    return x0 <= tol and y0 <= tol and x1 >= svg.width - tol and y1 >= svg.height - tol
 
 
 def _sampled(se, segments) -> tuple[np.ndarray, bool]:
