@@ -51,6 +51,11 @@ DEFAULT_CUTOFF = 1e-10
 AUTO_DENSE_MAX_DOF = 3000
 # auto_sigma stops within this many decades below AUTO_CONDITION, or after _AUTO_STEPS.
 _AUTO_SLACK, _AUTO_STEPS = 0.5, 8
+# A dense K_g is evaluated a few rows at a time, each (rows, m) temporary (its scale and
+# diagonal term) at most this size: below glibc's default 128 KiB mmap threshold, they
+# reuse freed heap where whole (m, m) ones took fresh pages (issue 22: a 250-node model's
+# build took 854 minor page faults, 366 of them its temporaries; docs/performance.md).
+_CHUNK_BYTES = 120 * 1024
 
 
 def _volume(sigma: float, d: int) -> float:
@@ -181,9 +186,21 @@ def _stiffness(r: np.ndarray, sigma: float, lam: float, mu: float,
     d = r.shape[-1]
     r2 = _squared_norm(r) if r2 is None else r2
     gamma = _overlap(r2, sigma, d) if gamma is None else gamma
+    if out is None:
+        return _blocks(r, sigma, lam, mu, pairs, r2, gamma, None), gamma
+    rows = max(1, _CHUNK_BYTES // (8 * r2[0].size))
+    for i in range(0, len(r), rows):  # a few rows at a time: temporaries of < 128 KiB
+        at = slice(i, i + rows)
+        _blocks(r[at], sigma, lam, mu, pairs, r2[at], gamma[at], out[:, at])
+    return [out[a, :, b] for a, b in pairs], gamma
+
+
+def _blocks(r, sigma, lam, mu, pairs, r2, gamma, out) -> list[np.ndarray]:
+    """:func:`_stiffness`'s blocks for offsets ``r`` with their ``r2`` and ``gamma``
+    (into ``out[a, :, b]``, or new arrays)."""
+    d = r.shape[-1]
     scale = gamma / sigma**4
     diag = (lam + mu) * sigma**2 / 2 + mu * (d * sigma**2 / 2 - r2 / 4)
-    del r2
     blocks = []
     for a, b in pairs:
         v = None if out is None else out[a, :, b]
@@ -193,7 +210,7 @@ def _stiffness(r: np.ndarray, sigma: float, lam: float, mu: float,
             v += diag
         v *= scale
         blocks.append(v)
-    return blocks, gamma
+    return blocks
 
 
 def cutoff_radius(sigma: float, cutoff: float = DEFAULT_CUTOFF) -> float:

@@ -234,8 +234,9 @@ class KronField:
 
     def sq_norm(self) -> float:
         """The sum of the squares of ``Phi``, the trace of ``Phi^T Phi``."""
-        if self.g is None:
-            return float(self.d * np.vdot(self._p, self._p))
+        if self.g is None:  # one C-ordered copy (vdot of the Fortran array made two)
+            p = self._p.ravel()
+            return float(self.d * np.vdot(p, p))
         return float(self.d * np.trace(self._block))
 
     def dense(self) -> np.ndarray:
@@ -331,8 +332,19 @@ class ElementBasis:
         return self._at_model.dense()
 
     def stiffness(self) -> np.ndarray:
-        """``Phi^T K Phi``, (n, n), full."""
+        """``Phi^T K Phi``, (n, n), full (made again, the same numbers, after
+        :meth:`take_stiffness`)."""
+        if self._stiffness is None:
+            Kw = whitened(self.model)[2]
+            Kw /= self.model.material.rho
+            self._stiffness = Kw
         return self._stiffness
+
+    def take_stiffness(self) -> np.ndarray:
+        """:meth:`stiffness`, handed over: the basis no longer holds it (the caller may
+        overwrite it, and a morph keeps one (n, n) array fewer)."""
+        K, self._stiffness = self.stiffness(), None
+        return K
 
     def at_nodes(self, x: np.ndarray) -> np.ndarray:
         """``Phi x`` at the model's nodes: ``s (I kron G L^-T) x``."""
