@@ -213,6 +213,10 @@ class KronField:
     @cached_property
     def _p(self) -> np.ndarray:
         """``s C L^-T``, (m, mc): the whitened basis at the model's nodes (``C = G``)."""
+        return self._whitened_nodes()
+
+    def _whitened_nodes(self) -> np.ndarray:
+        """:attr:`_p`, made (not kept)."""
         return blas.dtrmm(self.scale, self.l_inv, self.inner, side=1, lower=1, trans_a=1)
 
     @cached_property
@@ -234,8 +238,11 @@ class KronField:
 
     def sq_norm(self) -> float:
         """The sum of the squares of ``Phi``, the trace of ``Phi^T Phi``."""
-        if self.g is None:  # one C-ordered copy (vdot of the Fortran array made two)
-            p = self._p.ravel()
+        if self.g is None:  # one C-ordered copy (vdot of the Fortran array made two);
+            # the product kept only when the Gram's block made it (a morph's steps never
+            # read it: 8 m^2 bytes fewer kept)
+            p = self.__dict__.get("_p")
+            p = (self._whitened_nodes() if p is None else p).ravel()
             return float(self.d * np.vdot(p, p))
         return float(self.d * np.trace(self._block))
 
