@@ -26,8 +26,8 @@ from .shape import as_shape
 
 __all__ = ["DEFAULT_SIGMA", "AUTO_CONDITION", "MAX_CONDITION", "MIN_SIGMA", "MAX_SIGMA",
            "DEFAULT_CUTOFF", "AUTO_DENSE_MAX_DOF", "auto_sigma", "check_sigma",
-           "cutoff_radius", "gaussian", "gram_entries", "pair_squared_distances",
-           "squared_norms", "stiffness_entries", "stiffness_matrix",
+           "cutoff_radius", "gaussian", "gram_entries", "squared_norms", "stiffness_entries",
+           "stiffness_matrix",
            "stiffness_components", "stiffness_component_pairs", "self_entries",
            "gaussian_from_overlap", "condition_bound",
            "auto_sigma_condition", "singular_gram"]
@@ -53,8 +53,8 @@ AUTO_DENSE_MAX_DOF = 3000
 _AUTO_SLACK, _AUTO_STEPS = 0.5, 8
 # A dense K_g is evaluated a few rows at a time, each (rows, m) temporary (its scale and
 # diagonal term) at most this size: below glibc's default 128 KiB mmap threshold, they
-# reuse freed heap where whole (m, m) ones took fresh pages (issue 22: a 250-node model's
-# build took 854 minor page faults, 366 of them its temporaries; docs/performance.md).
+# reuse freed heap where whole (m, m) ones took fresh pages (issue 22: a 250-node
+# morph's K_g took 854 minor page faults, 366 of them its temporaries).
 _CHUNK_BYTES = 120 * 1024
 
 
@@ -144,12 +144,11 @@ def stiffness_matrix(r: np.ndarray, sigma: float, lam: float, mu: float, *,
                      r2: np.ndarray | None = None, gamma: np.ndarray | None = None,
                      order: str = "C") -> np.ndarray:
     """The dense stiffness in the Gaussian basis, ``K_g`` (dm, dm), component-major (7),
-    for the offsets ``r`` (m, m, d) of all node pairs, or the nodes (m, d) themselves
-    (their offsets ``r_ij = X_j - X_i`` then made a few rows at a time, never whole): the
-    entries of :func:`stiffness_entries`, each block evaluated in place where it lies, a
-    few rows at a time (temporaries below ``_CHUNK_BYTES``; no (m, m, d, d) array and no
-    transposed copy of it; bitwise the same numbers). ``order="F"``: the same numbers laid
-    out in Fortran order (LAPACK's), written as the C-ordered transpose from the
+    for the offsets ``r`` (m, m, d) of all node pairs: the entries of
+    :func:`stiffness_entries`, each block evaluated in place where it lies, a few rows at
+    a time (temporaries of at most ``_CHUNK_BYTES``; no (m, m, d, d) array and no
+    transposed copy of it; bitwise the same numbers). ``order="F"``: the same numbers
+    laid out in Fortran order (LAPACK's), written as the C-ordered transpose from the
     transposed offsets (``r_ji`` is ``r_ij`` read the other way round; ``r2`` and
     ``gamma`` are exactly symmetric)."""
     m, d = r.shape[0], r.shape[-1]
@@ -157,40 +156,17 @@ def stiffness_matrix(r: np.ndarray, sigma: float, lam: float, mu: float, *,
     if order == "F":  # K^ab_ij to [b, j, a, i] of the C view of a Fortran (dm, dm) array
         full = np.empty((d * m, d * m), order="F")
         out = full.T.reshape(d, m, d, m).transpose(2, 1, 0, 3)
+        r = r.transpose(1, 0, 2)
         r2, gamma = (None if r2 is None else r2.T), (None if gamma is None else gamma.T)
     else:
         full = out = np.empty((d, m, d, m))
-    rows_of = _offset_rows(r, transpose=order == "F")
     step = max(1, _CHUNK_BYTES // (8 * m))
     for i in range(0, m, step):
         at = slice(i, i + step)
-        r_at = rows_of(at)
-        r2_at = _squared_norm(r_at) if r2 is None else r2[at]
+        r2_at = _squared_norm(r[at]) if r2 is None else r2[at]
         gamma_at = _overlap(r2_at, sigma, d) if gamma is None else gamma[at]
-        _blocks(r_at, sigma, lam, mu, pairs, r2_at, gamma_at, out[:, at])
+        _blocks(r[at], sigma, lam, mu, pairs, r2_at, gamma_at, out[:, at])
     return full.reshape(d * m, d * m)
-
-
-def _offset_rows(r: np.ndarray, *, transpose: bool):
-    """``at -> `` the rows ``at`` of the offsets ``r_ij = X_j - X_i`` (or of their
-    transpose, ``X_i - X_j``), from the offsets (m, m, d) or the nodes (m, d)."""
-    if r.ndim == 3:
-        r = r.transpose(1, 0, 2) if transpose else r
-        return lambda at: r[at]
-    if transpose:
-        return lambda at: r[at, None, :] - r[None, :, :]
-    return lambda at: r[None, :, :] - r[at, None, :]
-
-
-def pair_squared_distances(x: np.ndarray) -> np.ndarray:
-    """``|X_j - X_i|^2`` (m, m) of the nodes ``x`` (m, d): :func:`squared_norms` of their
-    offsets, bitwise, made a few rows at a time (no (m, m, d) offset table)."""
-    m = len(x)
-    out = np.empty((m, m))
-    step = max(1, _CHUNK_BYTES // (8 * m * x.shape[-1]))
-    for i in range(0, m, step):
-        out[i:i + step] = _squared_norm(x[None, :, :] - x[i:i + step, None, :])
-    return out
 
 
 def self_entries(sigma: float, d: int, lam: float, mu: float) -> tuple[float, float]:

@@ -29,8 +29,8 @@ from .element import (
     cutoff_radius,
     gaussian,
     gram_entries,
-    pair_squared_distances,
     singular_gram,
+    squared_norms,
     stiffness_entries,
     stiffness_matrix,
 )
@@ -234,26 +234,27 @@ class FEModel:
                 f"modes(n), apply_mass, apply_stiffness or the sparse gram_sparse instead")
 
     @cached_property
-    def _r2(self) -> np.ndarray:
-        """|r_ij|^2 of the offsets ``r_ij = X_j - X_i``, shared by G, Gamma and K_g (the
-        offsets themselves are made a few rows at a time where they are read)."""
+    def _offsets(self) -> np.ndarray:
         self._check_dense("the offset table")
-        return pair_squared_distances(self.points)
+        x = self.points
+        return x[None, :, :] - x[:, None, :]  # r_ij = X_j - X_i
+
+    @cached_property
+    def _r2(self) -> np.ndarray:
+        return squared_norms(self._offsets)  # |r_ij|^2, shared by G, Gamma and K_g
 
     @cached_property
     def gram(self) -> tuple[np.ndarray, np.ndarray]:
         """Dense ``(G, Gamma)`` of the exact model, each (m, m)."""
-        return gram_entries(self.points, self.width, self._r2)  # r2 given: r's d read
+        return gram_entries(self._offsets, self.width, self._r2)
 
     @cached_property
     def stiffness_gaussian(self) -> np.ndarray:
         """Dense stiffness in the Gaussian basis, ``K_g`` (dm, dm), component-major (7)."""
         self._check_dense("K_g")
         lam, mu = self.lame
-        K_g = stiffness_matrix(self.points, self.width, lam, mu, r2=self._r2,
-                               gamma=self.gram[1])
-        self._drop_offsets()
-        return K_g
+        return stiffness_matrix(self._offsets, self.width, lam, mu, r2=self._r2,
+                                gamma=self.gram[1])
 
     def stiffness_gaussian_work(self) -> np.ndarray:
         """A fresh dense ``K_g`` (dm, dm) in Fortran order, the caller's to overwrite (an
@@ -263,16 +264,8 @@ class FEModel:
             return np.array(self.stiffness_gaussian, order="F")
         self._check_dense("K_g")
         lam, mu = self.lame
-        K_g = stiffness_matrix(self.points, self.width, lam, mu, r2=self._r2,
-                               gamma=self.gram[1], order="F")
-        self._drop_offsets()
-        return K_g
-
-    def _drop_offsets(self) -> None:
-        """Forget the offsets' squared norms once ``G``, ``Gamma`` and ``K_g`` are made
-        from them (made again, the same numbers, if asked): (m, m) doubles a kept model
-        held for nothing (issue 22)."""
-        self.__dict__.pop("_r2", None)
+        return stiffness_matrix(self._offsets, self.width, lam, mu, r2=self._r2,
+                                gamma=self.gram[1], order="F")
 
     # -- sparse model: pairs within the cutoff radius ----------------------------------
 
