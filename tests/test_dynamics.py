@@ -94,3 +94,26 @@ def test_newmark_checks_its_parameters():
         Newmark(K, np.zeros((3, 3)), dt=0.1)
     nm = Newmark(K, C, dt=0.1)
     assert nm.coefficients[0] == 1 / (0.25 * 0.1**2)  # a0 of (15), computed once
+
+
+def test_newmark_with_a_lift_is_newmark_on_the_lifted_matrix_bitwise():
+    """Newmark(K, C, lift=kappa) factors and steps as Newmark(K + kappa I, C), bit for bit,
+    and leaves K as it was; its product with the stiffness is the lifted matrix's (x zero
+    or not)."""
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(30, 30))
+    K = A @ A.T
+    C = 0.3 * K + 0.1 * np.eye(30)
+    kappa = 0.7
+    lifted = K.copy()
+    lifted.flat[::31] += kappa
+    kept = K.copy()
+    a, b = Newmark(K, C, dt=0.2, lift=kappa), Newmark(lifted, C, dt=0.2)
+    assert np.array_equal(a.factor, b.factor)
+    assert np.array_equal(a.diagonal(), np.diagonal(lifted))
+    x, v, acc, f = rng.normal(size=(4, 30))
+    for got, want in zip(a.step(x, v, acc, f), b.step(x, v, acc, f), strict=True):
+        assert np.array_equal(got, want)
+    for y in (x, np.zeros(30)):
+        assert np.array_equal(a.stiffness_dot(y), lifted @ y)
+    assert np.array_equal(K, kept)

@@ -197,3 +197,27 @@ def test_coincident_nodes_are_named():
     ring[10] = ring[9] + 1e-9
     with pytest.raises(ValueError, match="nodes 9 and 10 .* nearly coincident"):
         FEModel(ring, sigma=None).modes()
+
+
+@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("order", ["C", "F"])
+@pytest.mark.parametrize("chunk", [1, 3 * 8 * 23, 10**9])
+def test_stiffness_matrix_by_rows_is_the_whole_array_bitwise(monkeypatch, d, order, chunk):
+    """K_g written a few rows at a time (one row, 3 rows of 23 nodes, all rows at once)
+    holds the numbers of stiffness_entries's whole-array evaluation, bit for bit, in the
+    order asked; the offsets, r2 and gamma passed are left as they were."""
+    import modalmorph.core.element as element
+
+    monkeypatch.setattr(element, "_CHUNK_BYTES", chunk)
+    x = np.random.default_rng(d).normal(size=(23, d))
+    r = x[None, :, :] - x[:, None, :]
+    r2 = np.einsum("...a,...a->...", r, r)
+    gamma = gram_entries(r, 0.9, r2)[1]
+    kept = [a.copy() for a in (r, r2, gamma)]
+    whole = stiffness_entries(r, 0.9, 1.2, 0.4).transpose(2, 0, 3, 1).reshape(23 * d, -1)
+    for kw in ({}, {"r2": r2, "gamma": gamma}):
+        K = stiffness_matrix(r, 0.9, 1.2, 0.4, order=order, **kw)
+        assert K.flags[f"{order}_CONTIGUOUS"]
+        assert np.array_equal(K, whole)
+    for a, b in zip((r, r2, gamma), kept, strict=True):
+        assert np.array_equal(a, b)

@@ -193,3 +193,35 @@ def test_similarity_free_full_is_the_diagonal_form_with_dependent_fields():
         want = similarity_free(w, B)
         assert_allclose(similarity_free_full(np.diag(w**2), B), want,
                         atol=1e-10 * np.abs(want).max())
+
+
+def test_lifted_stiffness_paths_are_the_lifted_copies_bitwise():
+    """The morph's K_mod = K_el + kappa I is not formed: the damping made from K_el with
+    its diagonal lifted is b times the lifted copy, bit for bit and in its (C) order;
+    K_el is left as it was; the element basis hands its stiffness over and makes the
+    same numbers again when asked."""
+    from modalmorph.simulation.system import damping_matrix
+
+    a, b, pairs = _ellipses(60)
+    system = Simulation(a, b, pairs).system
+    K_el, kappa = system.stiffness, system.kappa
+    kept = K_el.copy()
+    lifted = K_el.copy()
+    lifted.flat[::len(K_el) + 1] += kappa
+    for K in (K_el, np.asfortranarray(K_el)):
+        C = damping_matrix(0.5, K, 2.0, uniform=True, lift=kappa)
+        want = 0.5 * 2 / np.sqrt(2.0) * lifted
+        assert np.array_equal(C, want) and C.flags.c_contiguous
+    assert np.array_equal(K_el, kept)
+    assert system.newmark.lift == kappa and system.newmark.K is K_el
+    with pytest.raises(ValueError, match="one damping ratio"):
+        damping_matrix((0.5, 0.5), K_el, 2.0, uniform=True, lift=kappa)
+    basis = system.basis
+    again = basis.stiffness()  # handed over during the build: made again
+    taken = basis.take_stiffness()
+    assert taken is again and basis._stiffness is None
+    assert np.array_equal(basis.stiffness(), taken)
+    field = system.field  # the springs' scale: the nodal product made, not kept
+    assert "_p" not in field.__dict__
+    p = field._whitened_nodes()
+    assert field.sq_norm() == float(field.d * np.vdot(p, p))  # vdot's own copies

@@ -453,7 +453,9 @@ def _weighted_mean(D: np.ndarray, values: np.ndarray) -> np.ndarray:
 class Newmark:
     """Newmark's method (14)-(15) for ``x'' + C x' + K x = f`` in modal coordinates.
 
-    ``C`` and ``K`` are (n, n) matrices (diagonal for uncoupled modes). ``alpha`` and
+    ``C`` and ``K`` are (n, n) matrices (diagonal for uncoupled modes); ``lift``: the
+    stiffness is ``K + lift I`` (its diagonal lifted, the loaded model's consistent springs
+    on the elastic stiffness, without an (n, n) copy of it). ``alpha`` and
     ``delta`` are Newmark's parameters (beta and gamma in most texts), refused outside the
     unconditionally stable range (:func:`check_newmark`). The coefficients of (15) and the
     Cholesky factor of the effective stiffness are computed once, at construction.
@@ -471,6 +473,7 @@ class Newmark:
     dt: float
     alpha: float = 0.25
     delta: float = 0.5
+    lift: float = 0.0
     # a0 .. a5 of (15), from alpha, delta and dt
     coefficients: tuple = field(init=False, repr=False, compare=False)
     # the Cholesky factor (lower) of K + a0 I + a1 C, the left side of (15)
@@ -494,7 +497,7 @@ class Newmark:
         # a1 C + K off the diagonal (the same sums), the diagonal redone in that order
         K_eff = np.multiply(a1, self.C, order="F")
         K_eff += self.K
-        K_eff.flat[::n + 1] = (np.diagonal(self.K) + a0) + a1 * np.diagonal(self.C)
+        K_eff.flat[::n + 1] = (self.diagonal() + a0) + a1 * np.diagonal(self.C)
         # K_eff is SPD and well conditioned (a0 I dominates for small steps): factorised
         # once, each step solves with the factor (two triangular solves, as cheap as a
         # product with an inverse; forming the inverse cost 2x the factor at 500 modes)
@@ -503,6 +506,20 @@ class Newmark:
             raise ValueError("Newmark's effective stiffness is not positive definite: "
                              "check the damping and the time step")
         object.__setattr__(self, "factor", L)
+
+    def diagonal(self) -> np.ndarray:
+        """The stiffness's diagonal, ``K``'s lifted: ``diag(K) + lift``."""
+        return np.diagonal(self.K) + self.lift
+
+    def stiffness_dot(self, x: np.ndarray) -> np.ndarray:
+        """``(K + lift I) x``: bitwise the product with the lifted matrix, which is formed
+        (a copy) only for a lift and an ``x`` not all zero (then every product is a zero
+        of the same sign, the diagonal's positive either way)."""
+        if not self.lift or not np.any(x):
+            return self.K @ x
+        K = self.K.copy()
+        K.flat[::len(K) + 1] += self.lift
+        return K @ x
 
     def step(self, x, v, a, f):
         """One step: state (x, v, a) at t and load f at t + dt -> state at t + dt."""

@@ -51,6 +51,11 @@ DEFAULT_CUTOFF = 1e-10
 AUTO_DENSE_MAX_DOF = 3000
 # auto_sigma stops within this many decades below AUTO_CONDITION, or after _AUTO_STEPS.
 _AUTO_SLACK, _AUTO_STEPS = 0.5, 8
+# A dense K_g is evaluated a few rows at a time, each (rows, m) temporary (its scale and
+# diagonal term) at most this size: below glibc's default 128 KiB mmap threshold, they
+# reuse freed heap where whole (m, m) ones took fresh pages (issue 22: a 250-node
+# morph's K_g took 854 minor page faults, 366 of them its temporaries).
+_CHUNK_BYTES = 120 * 1024
 
 
 def _volume(sigma: float, d: int) -> float:
@@ -140,22 +145,28 @@ def stiffness_matrix(r: np.ndarray, sigma: float, lam: float, mu: float, *,
                      order: str = "C") -> np.ndarray:
     """The dense stiffness in the Gaussian basis, ``K_g`` (dm, dm), component-major (7),
     for the offsets ``r`` (m, m, d) of all node pairs: the entries of
-    :func:`stiffness_entries`, each block evaluated in place where it lies (no (m, m, d, d)
-    array and no transposed copy of it; bitwise the same numbers). ``order="F"``: the
-    same numbers laid out in Fortran order (LAPACK's), written as the C-ordered transpose
-    from the transposed offsets (``r_ji`` is ``r_ij`` read the other way round; ``r2`` and
+    :func:`stiffness_entries`, each block evaluated in place where it lies, a few rows at
+    a time (temporaries of at most ``_CHUNK_BYTES``; no (m, m, d, d) array and no
+    transposed copy of it; bitwise the same numbers). ``order="F"``: the same numbers
+    laid out in Fortran order (LAPACK's), written as the C-ordered transpose from the
+    transposed offsets (``r_ji`` is ``r_ij`` read the other way round; ``r2`` and
     ``gamma`` are exactly symmetric)."""
     m, d = r.shape[0], r.shape[-1]
     pairs = [(a, b) for a in range(d) for b in range(d)]
     if order == "F":  # K^ab_ij to [b, j, a, i] of the C view of a Fortran (dm, dm) array
         full = np.empty((d * m, d * m), order="F")
-        _stiffness(r.transpose(1, 0, 2), sigma, lam, mu, pairs,
-                   None if r2 is None else r2.T, None if gamma is None else gamma.T,
-                   out=full.T.reshape(d, m, d, m).transpose(2, 1, 0, 3))
-        return full
-    out = np.empty((d, m, d, m))
-    _stiffness(r, sigma, lam, mu, pairs, r2, gamma, out=out)
-    return out.reshape(d * m, d * m)
+        out = full.T.reshape(d, m, d, m).transpose(2, 1, 0, 3)
+        r = r.transpose(1, 0, 2)
+        r2, gamma = (None if r2 is None else r2.T), (None if gamma is None else gamma.T)
+    else:
+        full = out = np.empty((d, m, d, m))
+    step = max(1, _CHUNK_BYTES // (8 * m))
+    for i in range(0, m, step):
+        at = slice(i, i + step)
+        r2_at = _squared_norm(r[at]) if r2 is None else r2[at]
+        gamma_at = _overlap(r2_at, sigma, d) if gamma is None else gamma[at]
+        _blocks(r[at], sigma, lam, mu, pairs, r2_at, gamma_at, out[:, at])
+    return full.reshape(d * m, d * m)
 
 
 def self_entries(sigma: float, d: int, lam: float, mu: float) -> tuple[float, float]:
@@ -169,10 +180,8 @@ def self_entries(sigma: float, d: int, lam: float, mu: float) -> tuple[float, fl
 
 def _stiffness(r: np.ndarray, sigma: float, lam: float, mu: float,
                pairs: list[tuple[int, int]], r2: np.ndarray | None = None,
-               gamma: np.ndarray | None = None, out: np.ndarray | None = None
-               ) -> tuple[list[np.ndarray], np.ndarray]:
-    """``[K_g^ab for (a, b) in pairs]`` and ``Gamma`` for offsets ``r`` (..., d); with
-    ``out`` (d, m, d, m) for offsets (m, m, d), each block is written to ``out[a, :, b]``.
+               gamma: np.ndarray | None = None) -> tuple[list[np.ndarray], np.ndarray]:
+    """``[K_g^ab for (a, b) in pairs]`` and ``Gamma`` for offsets ``r`` (..., d).
 
     Every ``(a, b)`` is evaluated as written, ``(-(lambda + mu) / 4 r_a) r_b``: ``K^ab``
     and ``K^ba`` may differ in the last bit, as they always have (the multilevel solver's
@@ -181,9 +190,15 @@ def _stiffness(r: np.ndarray, sigma: float, lam: float, mu: float,
     d = r.shape[-1]
     r2 = _squared_norm(r) if r2 is None else r2
     gamma = _overlap(r2, sigma, d) if gamma is None else gamma
+    return _blocks(r, sigma, lam, mu, pairs, r2, gamma, None), gamma
+
+
+def _blocks(r, sigma, lam, mu, pairs, r2, gamma, out) -> list[np.ndarray]:
+    """:func:`_stiffness`'s blocks for offsets ``r`` with their ``r2`` and ``gamma``
+    (written to ``out[a, :, b]`` for ``out`` (d, rows, d, m), or new arrays)."""
+    d = r.shape[-1]
     scale = gamma / sigma**4
     diag = (lam + mu) * sigma**2 / 2 + mu * (d * sigma**2 / 2 - r2 / 4)
-    del r2
     blocks = []
     for a, b in pairs:
         v = None if out is None else out[a, :, b]
@@ -193,7 +208,7 @@ def _stiffness(r: np.ndarray, sigma: float, lam: float, mu: float,
             v += diag
         v *= scale
         blocks.append(v)
-    return blocks, gamma
+    return blocks
 
 
 def cutoff_radius(sigma: float, cutoff: float = DEFAULT_CUTOFF) -> float:

@@ -213,6 +213,10 @@ class KronField:
     @cached_property
     def _p(self) -> np.ndarray:
         """``s C L^-T``, (m, mc): the whitened basis at the model's nodes (``C = G``)."""
+        return self._whitened_nodes()
+
+    def _whitened_nodes(self) -> np.ndarray:
+        """:attr:`_p`, made (not kept)."""
         return blas.dtrmm(self.scale, self.l_inv, self.inner, side=1, lower=1, trans_a=1)
 
     @cached_property
@@ -234,8 +238,12 @@ class KronField:
 
     def sq_norm(self) -> float:
         """The sum of the squares of ``Phi``, the trace of ``Phi^T Phi``."""
-        if self.g is None:
-            return float(self.d * np.vdot(self._p, self._p))
+        if self.g is None:  # one C-ordered copy (vdot of the Fortran array made two);
+            # the product kept only when the Gram's block made it (a morph's steps never
+            # read it: 8 m^2 bytes fewer kept)
+            p = self.__dict__.get("_p")
+            p = (self._whitened_nodes() if p is None else p).ravel()
+            return float(self.d * np.vdot(p, p))
         return float(self.d * np.trace(self._block))
 
     def dense(self) -> np.ndarray:
@@ -331,8 +339,19 @@ class ElementBasis:
         return self._at_model.dense()
 
     def stiffness(self) -> np.ndarray:
-        """``Phi^T K Phi``, (n, n), full."""
+        """``Phi^T K Phi``, (n, n), full (made again, the same numbers, after
+        :meth:`take_stiffness`)."""
+        if self._stiffness is None:
+            Kw = whitened(self.model)[2]
+            Kw /= self.model.material.rho
+            self._stiffness = Kw
         return self._stiffness
+
+    def take_stiffness(self) -> np.ndarray:
+        """:meth:`stiffness`, handed over: the basis no longer holds it (the caller may
+        overwrite it, and a morph keeps one (n, n) array fewer)."""
+        K, self._stiffness = self.stiffness(), None
+        return K
 
     def at_nodes(self, x: np.ndarray) -> np.ndarray:
         """``Phi x`` at the model's nodes: ``s (I kron G L^-T) x``."""

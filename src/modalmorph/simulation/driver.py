@@ -146,7 +146,7 @@ class Simulation:
         x = s.initial_coordinates(T0)
         v = s.options.c_v * x  # (18)
         # the loads rise from zero over the first step: a(0) without them (method.md §4)
-        a = -(s.newmark.C @ v) - s.newmark.K @ x
+        a = -(s.newmark.C @ v) - s.newmark.stiffness_dot(x)
         self.state = State(x, v, a, X1, T0, np.inf)
         self.history.record(s, np.zeros_like(x), X1, T0)
         self.stop_test()

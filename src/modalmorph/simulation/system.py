@@ -211,17 +211,23 @@ def _source_part(source: Shape, o: MorphOptions) -> dict:
     k_abs = o.k * k_ref * model.m / source.m
     X1 = reduced.to_normalized(source.points)  # all in the model's normalised frame
     field, spread = _nodal_field(model, basis, X1, reduced is not source)
-    stiffness = elastic_stiffness(basis, model.points, o.free_motion)
     # a reduced 3D model pulls consistently too, by the modes' fit of the stretch (§7)
     fitted = o.loads == "consistent" and spread is not None and model.dim == 3
     kappa, spring = springs(field, k_abs, consistent=o.loads == "consistent"
                             and (spread is None or fitted))
     fit = _gram_factor(field) if fitted else None
-    K_mod = _loaded(stiffness, kappa, spring) if o.scheme == "implicit" else stiffness
+    # after the springs (their arrays kept): the whitened stiffness it frees leaves a
+    # hole the damping matrix fits in, not fresh pages at the heap's top (issue 22)
+    stiffness = elastic_stiffness(basis, model.points, o.free_motion)
     uniform = kappa is not None and o.scheme == "implicit"  # K_mod = K_el + kappa I
+    # K_mod = K_el + kappa I is K_el read with its diagonal lifted (no (n, n) copy)
+    # where only its diagonal and products with it are needed (one damping ratio)
+    lift = kappa if uniform and np.ndim(o.damping) == 0 else 0.0
+    K_mod = (stiffness if lift or o.scheme != "implicit"
+             else _loaded(stiffness, kappa, spring))
     newmark = Newmark(K_mod, damping_matrix(o.damping, K_mod, _mean(kappa, spring, field.n),
-                                            uniform=uniform),
-                      o.dt / w_ref, o.alpha, o.delta)
+                                            uniform=uniform, lift=lift),
+                      o.dt / w_ref, o.alpha, o.delta, lift=lift)
     return dict(reduced=reduced, model=model, n_modes=n_modes, basis=basis,
                 field=field, spread=spread, k_ref=k_ref,
                 k_abs=k_abs, source_n=X1, stiffness=stiffness, kappa=kappa,
@@ -307,13 +313,14 @@ def _gram_factor(field) -> tuple:
 def elastic_stiffness(basis, points: np.ndarray, free_motion: str) -> np.ndarray:
     """The elastic stiffness in the coordinates of ``basis``: ``Phi^T K Phi`` (13), or
     with the similarity motions of the model's nodes ``points`` free
-    (``"similarity"``)."""
+    (``"similarity"``; an :class:`ElementBasis` then hands its own over,
+    :meth:`~ElementBasis.take_stiffness`)."""
     if free_motion == "none":
         return basis.stiffness()
     B = basis.mass_t(similarity_fields(points))
     if isinstance(basis, ModeBasis):
         return similarity_free(basis.modes.frequencies, B)
-    return similarity_free_full(basis.stiffness(), B)
+    return similarity_free_full(basis.take_stiffness(), B)  # K_w freed once it is used
 
 
 def similarity_free(frequencies: np.ndarray, B: np.ndarray) -> np.ndarray:
@@ -374,7 +381,7 @@ def _mean(kappa: float | None, spring, n: int) -> float:
 
 
 def damping_matrix(damping, K_mod: np.ndarray, spring_mean: float, *,
-                   uniform: bool = False) -> np.ndarray:
+                   uniform: bool = False, lift: float = 0.0) -> np.ndarray:
     """``C_mod = a I + b K_mod`` (5) on the loaded model, by one of the two rules.
 
     ``damping=(xi_1, xi_2)``: the paper's, the ratios at the loaded model's lowest and
@@ -387,13 +394,21 @@ def damping_matrix(damping, K_mod: np.ndarray, spring_mean: float, *,
     positive semi-definite elastic stiffness plus ``spring = w_s^2 I`` (consistent springs
     in the effective stiffness), so no loaded mode lies below ``w_s``, ``a`` is 0 and the
     lowest frequency is not computed (it gave ``a`` of the order of its rounding).
+    ``lift`` (one ratio, ``uniform``): the loaded stiffness is ``K_mod + lift I``, its
+    diagonal lifted here (the same numbers as ``b`` times the lifted matrix).
     """
     n = len(K_mod)
+    if lift and not (uniform and np.ndim(damping) == 0):
+        raise ValueError("damping_matrix: a lifted stiffness takes one damping ratio")
     if np.ndim(damping) == 0:  # every mode approaches at nearly the springs' one rate
         xi, w_s = float(damping), np.sqrt(spring_mean)
         b = 2 * xi / w_s
         if uniform:  # K_mod = K_el + w_s^2 I, K_el >= 0: w_lo >= w_s, so a = 0
-            return b * K_mod
+            if not lift:
+                return b * K_mod
+            C = np.multiply(b, K_mod, order="C")  # in the order of a lifted copy's
+            C.flat[::n + 1] = b * (np.diagonal(K_mod) + lift)
+            return C
         w_lo, _ = frequency_range(K_mod, highest=False)
         a = max(0.0, 2 * w_lo * (xi - b * w_lo / 2))
     else:
