@@ -143,13 +143,19 @@ def test_stretch_recovers_an_affine_map_and_takes_flat_sets():
     assert len(pairs) > 400  # measured 489 of 500
 
 
-def test_refine_starts_from_the_similarity_where_the_coarse_deformation_is_wrong():
+@pytest.mark.parametrize("choice_nodes", [None, 1000])
+def test_refine_starts_from_the_similarity_where_the_coarse_deformation_is_wrong(
+        monkeypatch, choice_nodes):
     """Landings at the true similarity but twisted by up to 30 degrees about the long
     axis (as a coarse deformation carried from coarse nodes can be): the refinement from
     them stays twisted (measured 2.68 target spacings), from whichever start, the
     landings or their best similarity, lies nearer the target's surface after its first
-    level it reaches the truth (0.05)."""
+    level it reaches the truth (0.05); so too where the two starts are tried on even
+    subsets and the choice carried to every node (``CHOICE_NODES`` below the 3000)."""
+    from modalmorph import matching
     from modalmorph.matching import _refined
+    if choice_nodes is not None:
+        monkeypatch.setattr(matching, "CHOICE_NODES", choice_nodes)
     src, tgt, truth = case(3000, 30, noise=0.01)
     s, t = mm.Shape(src), mm.Shape(tgt)
     x, y, true = s.normalized, t.normalized, t.to_normalized(truth)
@@ -160,5 +166,6 @@ def test_refine_starts_from_the_similarity_where_the_coarse_deformation_is_wrong
     along = (posed - centre) @ axis
     twist = Rotation.from_rotvec(np.radians(30) * (along / np.abs(along).max())[:, None] * axis)
     z = centre + twist.apply(posed - centre)  # 4.1 spacings from the truth at the median
-    assert np.median(np.linalg.norm(refine(x, z, y, 62) - true, axis=1)) / h >= 1.5
-    assert np.median(np.linalg.norm(_refined(x, z, y, 62) - true, axis=1)) / h <= 0.3
+    start = matching.COARSE // 4 // matching.REFINE_COARSER  # as the matcher's, 62
+    assert np.median(np.linalg.norm(refine(x, z, y, start) - true, axis=1)) / h >= 1.5
+    assert np.median(np.linalg.norm(_refined(x, z, y, start) - true, axis=1)) / h <= 0.3

@@ -225,3 +225,18 @@ def test_lifted_stiffness_paths_are_the_lifted_copies_bitwise():
     assert "_p" not in field.__dict__
     p = field._whitened_nodes()
     assert field.sq_norm() == float(field.d * np.vdot(p, p))  # vdot's own copies
+
+
+def test_fewer_modes_than_nodes_make_k_g_once(monkeypatch):
+    """A dense model morphed on fewer modes than it has degrees of freedom builds K_g
+    once: the eigensolver copies the kept matrix and the smooth motions' Rayleigh-Ritz
+    step reads it (it was built twice, one a Fortran work copy)."""
+    from modalmorph.core import model as model_module
+
+    made = []
+    build = model_module.stiffness_matrix
+    monkeypatch.setattr(model_module, "stiffness_matrix",
+                        lambda *a, **k: made.append(k.get("order", "C")) or build(*a, **k))
+    src, dst, pairs = _ellipses(60)
+    result = morph(src, dst, matching=pairs, modes=40)
+    assert result.shapes.shape[1] == 60 and made == ["C"]  # the source's model's, kept

@@ -125,3 +125,7 @@ def test_whitening_in_place_is_the_whole_array_expression(hand200, rng):
     for a in range(d):
         W[a * m:(a + 1) * m] = blas.dtrmm(1.0, l_inv, W[a * m:(a + 1) * m], lower=1)
     assert np.array_equal(Kw, (W + W.T) / 2)
+    fresh = FEModel(hand200)  # K_g not kept: made in Fortran order, the matcher's path
+    _, _, Kw_fresh = whitened(fresh)
+    assert Kw_fresh.flags.f_contiguous and np.array_equal(Kw_fresh, Kw)
+    assert "stiffness_gaussian" not in fresh.__dict__

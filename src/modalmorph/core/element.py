@@ -151,6 +151,8 @@ def stiffness_matrix(r: np.ndarray, sigma: float, lam: float, mu: float, *,
     laid out in Fortran order (LAPACK's), written as the C-ordered transpose from the
     transposed offsets (``r_ji`` is ``r_ij`` read the other way round; ``r2`` and
     ``gamma`` are exactly symmetric)."""
+    if order not in ("C", "F"):
+        raise ValueError(f"order must be 'C' or 'F', got {order!r}")
     m, d = r.shape[0], r.shape[-1]
     pairs = [(a, b) for a in range(d) for b in range(d)]
     if order == "F":  # K^ab_ij to [b, j, a, i] of the C view of a Fortran (dm, dm) array

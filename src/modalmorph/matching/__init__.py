@@ -301,8 +301,15 @@ def _match_cloud(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
     y = tgt.normalized
     gap, j = cKDTree(y).query(landed, workers=blas_threads(len(y)))
     cost = (gap / tgt.spacing) ** 2
-    keep = cost <= (_REJECT if opts.reject is None else opts.reject)
+    reject = _REJECT if opts.reject is None else opts.reject
+    keep = cost <= reject
     pairs = np.c_[np.flatnonzero(keep), j[keep]]
+    if len(pairs) < 2:  # nothing to align by
+        raise ShapeError(
+            f"only {len(pairs)} of the source's {src.m} nodes land within {np.sqrt(reject):.3g} "
+            f"target spacings of a target node: too few to pair the objects (a source of "
+            f"far fewer nodes than the target? resample them to comparable counts, or raise "
+            f"reject)")
     return pairs, cost[keep], align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]])
 
 
@@ -333,9 +340,10 @@ def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndar
     tried on even subsets of both objects."""
     i, j = np.arange(len(x)), np.arange(len(y))
     if len(x) > CHOICE_NODES:  # as wide cubes: an even subset's spacing grows as its count falls
-        i, j = even_subset(x, CHOICE_NODES), even_subset(y, CHOICE_NODES * len(y) // len(x))
-    if cube_levels(len(j), start) == 0:  # no level before the nodes': nothing to compare
-        return refine(x, z, y, start)
+        i = even_subset(x, CHOICE_NODES)
+        j = even_subset(y, max(CHOICE_NODES * len(y) // len(x), 1))
+    if start < 1 or cube_levels(len(j), start) == 0:  # a source of under 16 nodes, or no
+        return refine(x, z, y, start)  # level before the nodes': nothing to compare
     starts, yj = (z, align(x, z).apply(x)), y[j]
     tree = cKDTree(yj)
     trim = _GAP_TRIM * tree.query(yj, k=2)[0][:, 1].mean()

@@ -30,7 +30,7 @@ from scipy.spatial import cKDTree
 from ..core.shape import even_subset
 from ..threads import blas_threads
 
-__all__ = ["refine", "stretch", "cube_levels"]
+__all__ = ["cube_levels", "refine", "stretch"]
 
 _ROUNDS = 3  # transport and smoothing rounds of the last level, the nodes (not measured)
 _FEW = 0.25  # a level with fewer cubes than this x the source nodes is cheap: more rounds

@@ -67,6 +67,8 @@ def superposed_modes(model: FEModel, n: int) -> Modes:
     """The model's lowest ``n`` modes; when that is not all of them, with the Rayleigh-Ritz
     modes of the smooth motions outside their span (:func:`smooth_fields`,
     :meth:`FEModel.augmented`, method.md §7)."""
+    if n < model.dim * model.m and not model.truncated:
+        _ = model.stiffness_gaussian  # kept: both the solver and augmented read it (made once)
     md = model.modes(n)
     if n < model.dim * model.m:  # truncated: add smooth motions (method.md §7)
         md = model.augmented(md, smooth_fields(model, n))

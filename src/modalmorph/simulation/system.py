@@ -401,7 +401,7 @@ def damping_matrix(damping, K_mod: np.ndarray, spring_mean: float, *,
     if lift and not (uniform and np.ndim(damping) == 0):
         raise ValueError("damping_matrix: a lifted stiffness takes one damping ratio")
     if np.ndim(damping) == 0:  # every mode approaches at nearly the springs' one rate
-        xi, w_s = float(damping), np.sqrt(spring_mean)
+        xi, w_s = float(damping), np.sqrt(float(spring_mean))  # a number, not K_s
         b = 2 * xi / w_s
         if uniform:  # K_mod = K_el + w_s^2 I, K_el >= 0: w_lo >= w_s, so a = 0
             if not lift:

@@ -29,7 +29,7 @@ def solve(model, n: int) -> Modes:
     the inverse of its Cholesky factor, ``W = L^-T``, whitens ``M_g``.
 
     ``model`` is a :class:`modalmorph.core.model.FEModel` (its dense ``gram``,
-    ``gamma_condition`` and ``stiffness_gaussian``).
+    ``gamma_condition`` and a work copy of ``K_g``, ``stiffness_gaussian_work``).
     """
     d, m = model.dim, model.m
     _, Linv, Kw = whitened(model)
