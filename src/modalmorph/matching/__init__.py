@@ -58,7 +58,7 @@ from ..errors import OptionError, ShapeError
 from ..options import METHODS, ROTATIONS, MatchOptions
 from ..threads import blas_threads, limit
 from .alternation import Placement, alternate, fits, keep_or_turn
-from .clouds import cube_levels, refine, stretch
+from .clouds import cube_levels, finer, refine, stretch
 from .coherent import settle
 from .contours import keep_partners, match_contours
 from .features import (
@@ -352,7 +352,7 @@ def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndar
     z = firsts[best]
     if len(i) < len(x):  # the subset's first level carried to every node
         z = starts[best] + _carried(x[i], z - starts[best][i], x, 1.0)
-    return refine(x, z, y, 4 * start)  # from its second level on: cubes half as wide
+    return refine(x, z, y, finer(start, 1))  # from its second level on
 
 
 def _coarse_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
@@ -389,10 +389,9 @@ def _huge_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> n
     for level, passes in ((1, POSE_PASSES), (2, FINE_PASSES)):  # refine's first levels
         for _ in range(passes):
             posed = sub_t.to_normalized(align(x, sub_t.to_user(landed)).apply(x))
-            landed = refine(sub_s.normalized, posed, sub_t.normalized, start * 4 ** (level - 1),
-                            levels=1, smoothing=_SMOOTHING[level])
-    # refine from its third level: a start 16 times finer makes the first cubes 4 times smaller
-    landed = refine(sub_s.normalized, landed, sub_t.normalized, 16 * start,
+            landed = refine(sub_s.normalized, posed, sub_t.normalized,
+                            finer(start, level - 1), levels=1, smoothing=_SMOOTHING[level])
+    landed = refine(sub_s.normalized, landed, sub_t.normalized, finer(start, 2),  # its third
                     smoothing=HUGE_SMOOTHING)
     landed = tgt.to_normalized(sub_t.to_user(landed))
     sim = align(x, landed)

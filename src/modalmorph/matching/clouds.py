@@ -30,7 +30,7 @@ from scipy.spatial import cKDTree
 from ..core.shape import even_subset
 from ..threads import blas_threads
 
-__all__ = ["cube_levels", "refine", "stretch"]
+__all__ = ["cube_levels", "finer", "refine", "stretch"]
 
 _ROUNDS = 3  # transport and smoothing rounds of the last level, the nodes (not measured)
 _FEW = 0.25  # a level with fewer cubes than this x the source nodes is cheap: more rounds
@@ -264,6 +264,13 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
             return _average(x, z)
         if level == levels:
             return z
+
+
+def finer(start: int, levels: int) -> int:
+    """The ``start`` from which :func:`refine` begins ``levels`` levels finer than from
+    ``start``: its first cube width, ``sqrt(n / start) / _STEP`` target spacings, shrinks
+    ``_STEP`` times a level."""
+    return int(max(start, 1) * _STEP ** (2 * levels))
 
 
 def cube_levels(n: int, start: int) -> int:
