@@ -58,6 +58,7 @@ Run ``python benchmarks/match3d.py`` for the whole table (the peers only up to
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib.util
 import json
 import os
@@ -155,6 +156,7 @@ def torus_turns() -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate([about.as_matrix(), (about * flip).as_matrix()]), np.zeros((720, 3))
 
 
+@functools.cache
 def bone_turns() -> tuple[np.ndarray, np.ndarray]:
     """The bone's symmetries as rotations (4, 3, 3) and shifts (4, 3) (``p -> R p + t``):
     the identity and the half turns about its principal axes, each fitted by ICP to lay
@@ -326,6 +328,8 @@ def one(method: str, shape: str, m: int, angle: float, noise: float,
     t0 = time.perf_counter()
     pairs = PEERS[method](src, tgt)
     seconds = time.perf_counter() - t0
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # before the scoring
+    load = os.getloadavg()[0]
     err, h = errors(src, tgt, truth, pairs)
     paired = err[np.isfinite(err)]
     best = cKDTree(tgt).query(truth)[0] / h  # the nearest target point: no pairing does better
@@ -333,9 +337,7 @@ def one(method: str, shape: str, m: int, angle: float, noise: float,
                 sym=modulo_symmetry(shape, src, tgt, move, pairs, h),
                 p90=float(np.percentile(paired, 90)),
                 paired=len(paired) / len(err), w1=float(np.mean(err <= 1)),
-                w3=float(np.mean(err <= 3)), s=seconds,
-                peak=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-                load=os.getloadavg()[0])
+                w3=float(np.mean(err <= 3)), s=seconds, peak=peak, load=load)
 
 
 def child(args, method, shape, m, angle, variant="base") -> dict | str:
