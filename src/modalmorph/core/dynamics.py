@@ -12,7 +12,7 @@ from scipy.spatial import cKDTree
 from .affine import affine_fit_weights
 from .surfaces import closest_on_faces
 
-__all__ = ["Newmark", "LoadTargets", "ContourLoads", "contour_partners", "check_newmark",
+__all__ = ["Newmark", "lifted", "LoadTargets", "ContourLoads", "contour_partners", "check_newmark",
            "UNMATCHED_RULES", "CARRIERS", "AFFINE_CARRIERS"]
 
 UNMATCHED_RULES = ("arclength", "mean")
@@ -449,6 +449,14 @@ def _weighted_mean(D: np.ndarray, values: np.ndarray) -> np.ndarray:
     return np.einsum("bc,bcd->bd", w, np.broadcast_to(values, (*D.shape, values.shape[-1])))
 
 
+def lifted(K: np.ndarray, lift: float) -> np.ndarray:
+    """``K + lift I``, a copy: ``K``'s diagonal lifted (the same numbers as adding the
+    identity, without forming it)."""
+    out = K.copy()
+    out.flat[::len(out) + 1] += lift
+    return out
+
+
 @dataclass(frozen=True)
 class Newmark:
     """Newmark's method (14)-(15) for ``x'' + C x' + K x = f`` in modal coordinates.
@@ -517,9 +525,7 @@ class Newmark:
         of the same sign, the diagonal's positive either way)."""
         if not self.lift or not np.any(x):
             return self.K @ x
-        K = self.K.copy()
-        K.flat[::len(K) + 1] += self.lift
-        return K @ x
+        return lifted(self.K, self.lift) @ x
 
     def step(self, x, v, a, f):
         """One step: state (x, v, a) at t and load f at t + dt -> state at t + dt."""

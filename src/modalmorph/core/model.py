@@ -251,10 +251,7 @@ class FEModel:
     @cached_property
     def stiffness_gaussian(self) -> np.ndarray:
         """Dense stiffness in the Gaussian basis, ``K_g`` (dm, dm), component-major (7)."""
-        self._check_dense("K_g")
-        lam, mu = self.lame
-        return stiffness_matrix(self._offsets, self.width, lam, mu, r2=self._r2,
-                                gamma=self.gram[1])
+        return self._stiffness_gaussian("C")
 
     def stiffness_gaussian_work(self) -> np.ndarray:
         """A fresh dense ``K_g`` (dm, dm) in Fortran order, the caller's to overwrite (an
@@ -262,10 +259,13 @@ class FEModel:
         when that is kept, else made and not kept (one (dm, dm) array a model fewer)."""
         if "stiffness_gaussian" in self.__dict__:
             return np.array(self.stiffness_gaussian, order="F")
+        return self._stiffness_gaussian("F")
+
+    def _stiffness_gaussian(self, order: str) -> np.ndarray:
         self._check_dense("K_g")
         lam, mu = self.lame
         return stiffness_matrix(self._offsets, self.width, lam, mu, r2=self._r2,
-                                gamma=self.gram[1], order="F")
+                                gamma=self.gram[1], order=order)
 
     # -- sparse model: pairs within the cutoff radius ----------------------------------
 

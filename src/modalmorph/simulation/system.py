@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import linalg
 
-from ..core.dynamics import ContourLoads, LoadTargets, Newmark, contour_partners
+from ..core.dynamics import ContourLoads, LoadTargets, Newmark, contour_partners, lifted
 from ..core.element import self_entries
 from ..core.energy import node_energy
 from ..core.model import FEModel
@@ -367,11 +367,7 @@ def springs(field, k_abs: float, *, consistent: bool):
 def _loaded(stiffness: np.ndarray, kappa: float | None, spring) -> np.ndarray:
     """The loaded stiffness ``K_el + spring``, or ``K_el + kappa I`` (its diagonal lifted:
     the same numbers without the identity)."""
-    if kappa is None:
-        return stiffness + spring
-    K_mod = stiffness.copy()
-    K_mod.flat[::len(K_mod) + 1] += kappa
-    return K_mod
+    return stiffness + spring if kappa is None else lifted(stiffness, kappa)
 
 
 def _mean(kappa: float | None, spring, n: int) -> float:
