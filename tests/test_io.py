@@ -1,11 +1,11 @@
 """Reading shapes from every supported format, writing results, atomic output."""
 
 import json
+import logging
 import os
 import re
 import subprocess
 import sys
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -227,7 +227,7 @@ def test_svg_several_subpaths_are_contours(tmp_path):
     assert shape.sizes == (6, 6) and shape.closed
     assert shape.contour(0).points.max() <= 10 and shape.contour(1).points.min() >= 20
     mixed = _svg(tmp_path, '<path d="M0 0 H10 V10 Z M20 20 H30 V30"/>', "mixed.svg")
-    with pytest.raises(ValueError, match="mixes closed and open subpaths"):
+    with pytest.raises(ValueError, match="mixes closed and open contours"):
         read_shape(mixed)
 
 
@@ -259,23 +259,53 @@ def test_svg_circle_ellipse_rect_and_viewbox(tmp_path):
     ('<rect width="200" height="200" style="fill:#ffffff"/>', 1),  # a page's background
     ('<rect width="200" height="200" style="fill:none;opacity:0"/>'  # matplotlib's
      '<path d="M 20 20 L 180 20 L 180 180 Z" style="fill:#000;opacity:0"/>', 2),
-    ('<rect x="90" y="90" width="5" height="5" fill="red"/>', 0),  # drawn: read
+    ('<rect width="200" height="200" style="fill:#ffffff"/>'  # a plot's white axes patch
+     '<rect x="10" y="10" width="180" height="180" style="fill:#ffffff"/>', 2),
+    ('<rect x="10" y="10" width="180" height="180" fill="white"/>', 1),  # on a bare page
+    ('<path d="M 10 190 L 190 190" stroke="black"/>'  # an axis and a slanted tick
+     '<polyline points="0,0 10,5 20,10" stroke="black"/>', 2),
+    ('<rect x="90" y="90" width="5" height="5" fill="red"/>', 0),  # drawn, but smaller
 ])
-def test_svg_passes_over_what_does_not_show(tmp_path, before, passed):
-    """The outline read is the first that shows: not one drawn invisibly, nor a first
-    one covering the page while others follow; what was passed over is said."""
-    body = before + '<circle cx="100" cy="100" r="40"/>'
-    path = tmp_path / "page.svg"
-    path.write_text('<svg xmlns="http://www.w3.org/2000/svg" width="200" height="200">'
-                    f"{body}</svg>")
-    with warnings.catch_warnings(record=True) as said:
-        warnings.simplefilter("always")
+def test_svg_reads_the_largest_shape_drawn(tmp_path, before, passed, caplog):
+    """The outline read is the largest that draws a shape: not one drawn invisibly, nor a
+    first one covering the page while others follow, nor one filled in the page's colour
+    with no stroke, nor a straight line; the choice is logged."""
+    path = _svg(tmp_path, before + '<circle cx="100" cy="100" r="40"/>', "page.svg")
+    with caplog.at_level(logging.INFO, logger="modalmorph"):
         shape = read_shape(path)
-    on_circle = np.allclose(np.linalg.norm(shape.points - 100, axis=1), 40, rtol=1e-4)
-    assert on_circle == (passed > 0)
-    notes = [str(w.message) for w in said if "passed over" in str(w.message)]
-    assert notes == ([f"{path}: passed over {passed} outline(s) drawn invisibly or as the "
-                      "page's background"] if passed else [])
+    assert np.allclose(np.linalg.norm(shape.points - 100, axis=1), 40, rtol=1e-4)
+    assert f"({'the largest'}): <circle> 80 x 80; {passed} drawing none passed over" in (
+        caplog.text)
+
+
+def test_svg_white_on_a_dark_page_shows(tmp_path):
+    """Filled white on a dark background is drawn: read, past the background only."""
+    path = _svg(tmp_path, '<rect width="200" height="200" fill="navy"/>'
+                          '<rect x="20" y="20" width="160" height="160" fill="white"/>'
+                          '<circle cx="100" cy="100" r="40"/>')
+    shape = read_shape(path, nodes=80)
+    assert np.allclose(shape.points.min(axis=0), 20) and np.allclose(shape.points.max(axis=0),
+                                                                      180)
+
+
+def test_svg_object_choice(tmp_path):
+    """object= picks an outline as for images: a number in the order drawn, the one
+    centred nearest the page's centre, or all of them as contours."""
+    body = ('<rect x="0" y="0" width="10" height="10"/>'
+            '<circle cx="100" cy="100" r="20"/><rect x="140" y="10" width="50" height="50"/>')
+    path = _svg(tmp_path, body)
+    assert_allclose(read_shape(path, nodes=40).points.max(axis=0), [190, 60])  # largest
+    assert_allclose(read_shape(path, nodes=40, object=1).points.max(axis=0), [10, 10])
+    centre = read_shape(path, object="center").points
+    assert_allclose(np.linalg.norm(centre - 100, axis=1), 20, rtol=1e-4)
+    every = read_shape(path, nodes=90, object="all")
+    assert len(every.sizes) == 3 and every.closed
+    with pytest.raises(ValueError, match="object=4, but the file draws 3 outline"):
+        read_shape(path, object=4)
+    mixed = _svg(tmp_path, '<rect width="9" height="9"/><polyline points="20,0 30,9 40,0"/>',
+                 "mixed.svg")
+    with pytest.raises(ValueError, match="mixes closed and open contours"):
+        read_shape(mixed, object="all")
 
 
 @pytest.mark.parametrize("body, message", [

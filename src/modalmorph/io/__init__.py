@@ -8,7 +8,7 @@ extensions                             content                             modul
 ``.csv`` ``.tsv`` ``.txt``             ``x, y[, z]`` per row               :mod:`.points`
 ``.npy`` ``.npz``                      an (m, d) array                     :mod:`.points`
 ``.json``                              ``[[x, y], ...]`` or an object      :mod:`.points`
-``.svg``                               the first path, polygon, etc.       :mod:`.svg`
+``.svg``                               one outline (path, polygon, etc.)   :mod:`.svg`
 ``.png`` ``.tif`` ``.tiff`` ``.jpg``   one object's contours (and holes)   :mod:`.images`
 ``.jpeg`` ``.bmp``
 ``.ply`` ``.obj`` ``.stl`` ``.off``    a triangle surface or point cloud   :mod:`.meshes`

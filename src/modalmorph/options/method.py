@@ -210,9 +210,10 @@ class ReadOptions(Options):
         "images (two-level masks need none), whose refusal proposes Otsu's",
         group="input", kind="float")
     object: str | int = option(
-        "largest", "images: which object to take: largest, center (the one nearest the "
-        "image centre), all (every object, its contours one after another) or a number "
-        "(1 = the first in reading order)", group="input", kind="object", choices=OBJECTS)
+        "largest", "images and SVG: which object (outline) to take: largest, center (the "
+        "one nearest the image's or page's centre), all (every one, its contours one after "
+        "another) or a number (1 = the first in reading order; in SVG, drawn)",
+        group="input", kind="object", choices=OBJECTS)
     label: int | None = option(
         None, "label images (segmentations, NIfTI): the value of the object's pixels",
         group="input", kind="int")
