@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from modalmorph import FEModel, Matching, MatchOptions, MorphOptions, match, track
+from modalmorph import FEModel, Matching, MatchOptions, MorphOptions, Shape, match, track
 from modalmorph.datasets import load_hand, load_hands
 from modalmorph.errors import OptionError, ShapeError
 from modalmorph.options import parameters
@@ -163,6 +163,21 @@ def test_3d_point_sets(rng):
     assert r.converged
     assert r.shapes.shape[1:] == (150, 3)
     assert np.all(r.energy >= 0)
+
+
+def test_a_curve_written_in_3d_is_morphed_as_a_curve(rng):
+    """A contour written with a z column (x, y, 0), ordered or not, is not called reached
+    while it is 3-8 units from the target: it morphs onto the target's curve."""
+    t = np.linspace(0, 2 * np.pi, 80, endpoint=False)
+    a = np.c_[30 * np.cos(t), 20 * np.sin(t), np.zeros_like(t)]
+    b = np.c_[25 * np.cos(t) + 3, 24 * np.sin(t), np.zeros_like(t)]
+    order = rng.permutation(80)
+    for src, tgt in ((a, b), (Shape(a, ordered=False), Shape(b, ordered=False)),
+                     (a[order], b[order])):
+        r = morph(src, tgt)
+        gap = np.linalg.norm(r.shapes[-1][:, None] - b[None], axis=2).min(axis=1)
+        assert r.converged and r.steps >= 3
+        assert gap.mean() < 0.1 * 2 * np.pi * 25 / 80  # a tenth of the target's spacing
 
 
 @pytest.mark.parametrize(

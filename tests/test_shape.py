@@ -8,7 +8,7 @@ from hypothesis.extra.numpy import arrays
 from numpy.testing import assert_allclose
 
 from modalmorph import Shape
-from modalmorph.core.shape import ImageFrame, resample
+from modalmorph.core.shape import ImageFrame, resample, traces_curve
 from modalmorph.errors import ShapeError
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
@@ -203,3 +203,21 @@ def test_a_check_that_passed_is_not_run_again_and_one_that_failed_is():
     for _ in range(2):  # repeated nodes refused every time
         with pytest.raises(ShapeError, match="repeated nodes"):
             Shape(bad)
+
+
+def test_3d_points_along_a_curve_in_order_are_ordered_by_default():
+    """3D points that trace a curve in the order given (a contour with a z column, a
+    helix) are an ordered polyline by default; the same points shuffled, and points on a
+    surface, are a point set."""
+    rng = np.random.default_rng(3)
+    t = np.linspace(0, 2 * np.pi, 1000, endpoint=False)
+    curves = {"planar": np.c_[30 * np.cos(t), 20 * np.sin(t), np.zeros_like(t)],
+              "helix": np.c_[np.cos(3 * t), np.sin(3 * t), 0.3 * t]}
+    for name, pts in curves.items():
+        assert traces_curve(pts) and Shape(pts).ordered, name
+        shuffled = pts[rng.permutation(len(pts))]
+        assert not traces_curve(shuffled) and not Shape(shuffled).ordered, name
+    u = rng.normal(size=(2000, 3))
+    sphere = u / np.linalg.norm(u, axis=1, keepdims=True)
+    assert not traces_curve(sphere) and not Shape(sphere).ordered
+    assert not Shape(curves["planar"], ordered=False).ordered  # said: kept

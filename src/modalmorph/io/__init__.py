@@ -158,9 +158,10 @@ def read_shape(path, options: ReadOptions | None = None, *, closed: bool | None 
         coordinates, y down, as images and SVG: for inputs mixing the two),
         ``threshold`` (images only: grey level separating the object from the
         background, in the image's own units, 0-255 for 8-bit images) and ``object``
-        (images only: which object to outline, ``"largest"`` (not touching the border if
-        a large enough one does not), ``"center"`` (nearest the image centre) or a label
-        number, 1 = the first in reading order; the choice is logged).
+        (images and SVG: which object or outline to take, ``"largest"`` (in images, not
+        touching the border if a large enough one does not), ``"center"`` (nearest the
+        image's or page's centre), ``"all"`` or a number, 1 = the first in reading order
+        (in SVG, drawn); the choice is logged).
     closed : bool, optional
         Whether a contour closes on itself; overrides the file (an SVG path's ``Z``, a
         JSON ``"closed"``). Defaults to closed.

@@ -4,7 +4,9 @@ One class per kind of object, chosen once by :func:`choose_stop_test`, all with 
 interface of :class:`StopTest`: :class:`CurveStop` for contours (the two-way distance
 between the curves; :class:`ContourStop` per pair of partner contours),
 :class:`SurfaceStop` for 3D point sets and surfaces (the two-way distance to the other's
-surface less the target's roughness), :class:`PairStop` for the others (the mean
+surface less the target's roughness), :class:`PairStop` for the others (a 3D point set
+along a curve given unordered among them: the quadrics of its neighbours lie flat in any
+plane through the curve, and would call a curve beside it reached) (the mean
 distance of the pulled pairs). Distances are in the model's normalised units.
 """
 
@@ -17,7 +19,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..core.quality import Polyline
-from ..core.shape import Shape, even_subset, resample
+from ..core.shape import CURVE_DIMENSION, Shape, curve_dimension, even_subset, resample
 from ..core.surfaces import face_distances, face_tree
 from ..options import MorphOptions
 
@@ -253,7 +255,8 @@ def choose_stop_test(source: Shape, target: Shape, target_n: np.ndarray,
     if source.ordered and target.ordered:
         return CurveStop(limits, target_n, closed=source.closed,
                          target_closed=target.closed, m=source.m)
-    if source.dim == 3 and min(source.m, target.m) > PLANE:
+    if source.dim == 3 and min(source.m, target.m) > PLANE and (
+            target.faces is not None or curve_dimension(target_n) >= CURVE_DIMENSION):
         return SurfaceStop(limits, target_n, m=source.m, faces=target.faces,
                            source_faces=source.faces)
     return PairStop(limits)
