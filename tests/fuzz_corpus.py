@@ -97,7 +97,8 @@ def _nifti_cases(ext: str) -> dict[str, bytes]:
         "blank": _nifti(ext, np.zeros((20, 20), np.uint8)),
         "labels": _nifti(ext, ring),  # a label image without --label: refused, named
         "volume": _nifti(ext, np.zeros((8, 8, 3, 2), np.uint8)),  # 3D+t: refused
-        "frames": _nifti(ext, np.stack([_mask()] * 3, axis=-1)),  # 2D+t: a sequence
+        "frames": _nifti(ext, np.stack([_mask()] * 3, axis=-1)[:, :, None]),  # 2D+t
+        "stack": _nifti(ext, np.stack([_mask()] * 3, axis=-1)),  # 3D: a surface
         "zero_spacing": _nifti(ext, _mask(), zero_spacing=True),
         "nan": _nifti(ext, np.where(_mask() > 0, np.nan, 0.0).astype(np.float32)),
         "one_pixel": _nifti(ext, np.ones((1, 1), np.uint8)),

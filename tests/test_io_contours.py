@@ -134,6 +134,34 @@ def test_nifti_2d_t_frames_in_mm(tmp_path):
         read_shape(two_d)
 
 
+def test_nifti_volume_is_read_as_its_object_surface_in_mm(tmp_path):
+    """An (X, Y, Z) volume read as one shape is its object's surface: a closed mesh with
+    outward faces, in mm (voxel (i, j, k) at (i dx, j dy, k dz)), on the object's boundary
+    within a voxel, enclosing its volume within 8 % (5.5: the smoothing rounds a ball 5
+    voxels thick); the largest object by default."""
+    from modalmorph.io import read_shape
+
+    spacing = np.array([0.8, 0.9, 2.0])
+    i, j, k = np.indices((40, 44, 24))
+    radii = np.array([12.0, 10.0, 5.0])  # voxels
+    ball = ((i - 20) / radii[0]) ** 2 + ((j - 22) / radii[1]) ** 2 + ((k - 12) / radii[2]) ** 2
+    labels = np.where(ball <= 1, 2, 0).astype(np.uint8)
+    labels[1:4, 1:4, 1:4] = 2  # a speck: not the largest object
+    labels[30:34, 2:5, 2:5] = 1
+    path = _save_nifti(tmp_path / "organ.nii.gz", labels, tuple(spacing))
+    shape = read_shape(path, label=2)
+    assert shape.dim == 3 and shape.faces is not None and shape.frame.unit == "mm"
+    rel = (shape.points / spacing - [20, 22, 12]) / radii  # back to the ball's own units
+    assert np.abs(np.linalg.norm(rel, axis=1) - 1).max() < 1.0 / radii.min()
+    a, b, c = (shape.points[shape.faces[:, n]] for n in range(3))
+    enclosed = np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6  # > 0: faces turn out
+    assert abs(enclosed / (np.count_nonzero(ball <= 1) * spacing.prod()) - 1) < 0.08
+    with pytest.raises(InputFileError, match="label image .* give label="):
+        read_shape(path)
+    with pytest.raises(InputFileError, match="no object in the volume"):
+        read_shape(path, threshold=5)
+
+
 def assert_radii(points, centre, radius, tol):
     r = np.hypot(*(points - centre).T)
     assert np.all(np.abs(r - radius) < tol), (r.min(), r.max(), radius)

@@ -13,7 +13,7 @@ extensions                             content                             modul
 ``.jpeg`` ``.bmp``
 ``.ply`` ``.obj`` ``.stl`` ``.off``    a triangle surface or point cloud   :mod:`.meshes`
 ``.vtk`` ``.vtu`` ``.msh`` ``.mesh``
-``.nii`` ``.nii.gz``                   a label slice (2D or 2D+t), in mm   :mod:`.nifti`
+``.nii`` ``.nii.gz``                   a label slice or volume, in mm      :mod:`.nifti`
 =====================================  ==================================  ==============
 
 Each module's docstring says what it reads, in detail. SVG and images need svgelements,

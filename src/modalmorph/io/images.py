@@ -36,7 +36,8 @@ from ..options import ReadOptions
 from .base import DEFAULT_NODES, RawShape, make_shape
 
 __all__ = ["INSIDE_FRACTION", "MAX_PARTIAL_ALPHA", "MIN_HOLE_AREA", "MIN_OBJECT_PIXELS",
-           "grey_levels", "image_contours", "mask_contours", "mask_shape", "read_image"]
+           "grey_levels", "image_contours", "label_pixels", "mask_contours", "mask_shape",
+           "read_image"]
 
 # An object inside the image is taken over a larger one touching the border when
 # its area is at least this fraction of the larger one's. A choice, not a measurement: an
@@ -126,7 +127,7 @@ def mask_shape(mask, name: str = "mask", *, label=None, nodes: int | None = None
     if array.ndim != 2 or min(array.shape) < 1 or array.dtype.kind not in "biuf":
         raise InputFileError(f"{name}: a mask must be a 2D numeric or bool array, got "
                              f"{array.dtype} {array.shape}")
-    parts = mask_contours(_label_pixels(array, name, label), name, choice)
+    parts = mask_contours(label_pixels(array, name, label), name, choice)
     frame = frame or ImageFrame(size=array.shape)
     return make_shape(name, np.vstack(parts), nodes=nodes or DEFAULT_NODES, frame=frame,
                       contours=_sizes(parts))
@@ -136,7 +137,7 @@ def _sizes(parts: list) -> tuple[int, ...] | None:
     return tuple(len(p) for p in parts) if len(parts) > 1 else None
 
 
-def _label_pixels(array: np.ndarray, name: str, label) -> np.ndarray:
+def label_pixels(array: np.ndarray, name: str, label) -> np.ndarray:
     """The object's pixels (bool) of a mask (the higher of two levels) or, with ``label``,
     of a label image."""
     if array.dtype.kind == "f" and not np.isfinite(array).all():
@@ -170,7 +171,7 @@ def image_contours(grey: np.ndarray, name: str, options: ReadOptions) -> list[np
     elif options.threshold is not None:
         raise InputFileError(f"{name}: give label= or threshold=, not both")
     else:
-        mask = _label_pixels(grey, name, options.label)
+        mask = label_pixels(grey, name, options.label)
     return mask_contours(mask, name, options.object)
 
 
@@ -249,11 +250,12 @@ def choose_objects(mask: np.ndarray, choice, name: str, connectivity: int = 1,
         _log.info("%s: %d object(s) of %d (%s px)", name, len(kept), count,
                   ", ".join(str(area[k]) for k in kept))
         return [labels == k + 1 for k in kept]
-    edge = np.unique(np.r_[labels[0], labels[-1], labels[:, 0], labels[:, -1]])
+    edge = np.unique(np.concatenate([np.take(labels, [0, -1], axis=a).ravel()
+                                     for a in range(labels.ndim)]))  # any dimension
     border = np.isin(index, edge)
     if isinstance(choice, str) and choice == "center":
-        rows, cols = np.indices(mask.shape)
-        centre = np.hypot(rows - (mask.shape[0] - 1) / 2, cols - (mask.shape[1] - 1) / 2)
+        centre = np.sqrt(sum((at - (n - 1) / 2) ** 2 for at, n in zip(
+            np.indices(mask.shape), mask.shape, strict=True)))
         pick = int(np.argmin(ndimage.minimum(centre, labels, index)))
         why = "nearest the image centre"
     elif isinstance(choice, str):
