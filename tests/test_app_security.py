@@ -2,6 +2,7 @@
 (issue 27): bombs, cross-site requests, malformed lengths, smuggling, caps, hostile names
 and signals. Every loop is bounded in count and time."""
 
+import gzip
 import http.client
 import io
 import json
@@ -148,6 +149,25 @@ def _png_header(width: int, height: int) -> bytes:
 def test_image_over_the_pixel_limit_is_refused_from_its_header(server, size):
     status, answer = _request(server, "POST", "/api/upload?name=big.png", _png_header(*size))
     assert status == 413 and "max_pixels" in answer["error"], answer
+
+
+@pytest.mark.parametrize("name", ["big.nii", "big.nii.gz"])
+def test_nifti_declaring_a_huge_volume_is_refused_from_its_header(server, name):
+    """A NIfTI header of 2000 x 2000 x 2000 float64 voxels (64 GB), the data never sent."""
+    nib = pytest.importorskip("nibabel")
+    header = nib.Nifti1Header()
+    header.set_data_shape((2000, 2000, 2000))
+    header.set_data_dtype(np.float64)
+    head = header.binaryblock + b"\0" * 4  # the extension flag, then no data at all
+    body = gzip.compress(head) if name.endswith(".gz") else head
+    status, answer = _request(server, "POST", f"/api/upload?name={name}", body)
+    assert status == 413 and "max_array_bytes" in answer["error"], answer
+    i, j = np.indices((40, 40))  # a small mask of the same kind is taken
+    small = nib.Nifti1Image(((i - 20) ** 2 + (j - 18) ** 2 < 150).astype(np.uint8), np.eye(4))
+    body = small.to_bytes()
+    status, answer = _request(server, "POST", f"/api/upload?name={name}",
+                              gzip.compress(body) if name.endswith(".gz") else body)
+    assert status == 200, answer
 
 
 def test_npy_declaring_a_huge_array_is_refused(server):

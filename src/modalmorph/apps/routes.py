@@ -29,8 +29,8 @@ from starlette.requests import Request
 from starlette.responses import HTMLResponse, Response
 from starlette.routing import Route
 
-from ..io import SUPPORTED_EXTENSIONS, read_shape
-from ..io.limits import LimitError, check_image, check_json, check_npy, check_npz
+from ..io import SUPPORTED_EXTENSIONS, extension, read_shape
+from ..io.limits import LimitError, check_image, check_json, check_nifti, check_npy, check_npz
 from .form import check_run, examples, field_of, morph_options, parse_options
 from .guard import check_request, read_body, read_json
 from .jobs import Job, Jobs
@@ -161,13 +161,15 @@ def _query_number(query, key: str, kind, low, high):
 
 def _read_upload(path: Path, name: str, nodes, threshold, limits: AppLimits):
     """The shape and its picture from a stored upload, every header checked first."""
-    suffix = path.suffix
+    suffix = extension(path)
     if suffix == ".npy":
         check_npy(path, limits.files)
     elif suffix == ".npz":
         check_npz(path, limits.files)
     elif suffix == ".json":
         check_json(path.read_bytes(), name, limits.files)
+    elif suffix in (".nii", ".nii.gz"):
+        check_nifti(path, limits.files)
     image = check_image(path, limits.files)
     shape = read_shape(path, nodes=nodes, threshold=threshold if image is not None else None)
     if shape.m > limits.max_nodes:
@@ -184,7 +186,7 @@ def _read_upload(path: Path, name: str, nodes, threshold, limits: AppLimits):
 async def _upload(request: Request, state: AppState) -> Response:
     query = request.query_params
     name = Path(query.get("name", "")).name
-    suffix = Path(name).suffix.lower()
+    suffix = extension(name)  # .nii.gz whole
     if suffix not in SUPPORTED_EXTENSIONS:
         raise Refused(HTTPStatus.BAD_REQUEST, f"{name or 'the file'}: unsupported file type "
                       f"{suffix!r}; supported: {', '.join(SUPPORTED_EXTENSIONS)}")

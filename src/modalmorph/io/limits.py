@@ -8,12 +8,15 @@ is inflated or decoded. numpy, Pillow and the standard library only.
 
 Which reader calls which: the NPY reader :func:`check_npy`, the NPZ reader
 :func:`check_npz`, the image reader :func:`check_image`, the JSON reader
-:func:`check_json`; every reader :func:`check_file_size` first.
+:func:`check_json`, the NIfTI reader :func:`check_nifti`; every reader
+:func:`check_file_size` first.
 """
 
 from __future__ import annotations
 
+import gzip
 import re
+import struct
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,7 +24,8 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["LimitError", "Limits", "DEFAULT_LIMITS", "check_file_size", "check_npy",
-           "check_npz", "check_image", "check_json", "json_depth", "check_shape"]
+           "check_npz", "check_image", "check_json", "check_nifti", "json_depth",
+           "check_shape"]
 
 
 class LimitError(ValueError):
@@ -179,6 +183,37 @@ def check_image(path, limits: Limits = DEFAULT_LIMITS) -> tuple[int, int] | None
                          f"the limit (max_pixels) is {limits.max_pixels} pixels",
                          "max_pixels")
     return width, height
+
+
+def check_nifti(path, limits: Limits = DEFAULT_LIMITS) -> tuple[int, ...] | None:
+    """The array shape a NIfTI-1 or -2 file declares, from its header (a few hundred bytes
+    inflated), or None when the header is not one; :class:`LimitError` when the data
+    would take over ``max_array_bytes``."""
+    path = Path(path)
+    check_file_size(path, limits)
+    opener = gzip.open if path.name.endswith(".gz") else open
+    try:
+        with opener(path, "rb") as stream:
+            head = stream.read(544)
+    except (OSError, EOFError):
+        return None
+    for order in "<>":
+        if len(head) >= 348 and struct.unpack(order + "i", head[:4])[0] == 348:  # NIfTI-1
+            dim, bitpix = struct.unpack(order + "8h", head[40:56]), struct.unpack(
+                order + "h", head[72:74])[0]
+        elif len(head) >= 540 and struct.unpack(order + "i", head[:4])[0] == 540:
+            bitpix, dim = struct.unpack(order + "h", head[14:16])[0], struct.unpack(
+                order + "8q", head[16:80])
+        else:
+            continue
+        shape = tuple(int(n) for n in dim[1:1 + min(max(dim[0], 0), 7)])
+        nbytes = int(np.prod([max(n, 0) for n in shape], dtype=object)) * max(bitpix, 8) // 8
+        if nbytes > limits.max_array_bytes:
+            raise LimitError(f"{path.name}: the NIfTI data {shape} of {bitpix} bits would "
+                             f"take {nbytes} bytes, the limit (max_array_bytes) is "
+                             f"{limits.max_array_bytes} bytes", "max_array_bytes")
+        return shape
+    return None
 
 
 _JSON_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.DOTALL)
