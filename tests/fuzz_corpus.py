@@ -429,6 +429,8 @@ def corpus(seed: int = 20050328) -> dict[str, bytes]:
         {k: v.replace(b",", b"\t") for k, v in text_cases.items()})
     add(".txt", _text(CONTOUR, " ", header=False),
         {k: v.replace(b",", b" ") for k, v in text_cases.items()})
+    add(".xyz", _text(OCTA_POINTS, " ", header=False),
+        {k: v.replace(b",", b" ") for k, v in text_cases.items()})
     add(".npy", _npy(CONTOUR), _npy_cases(rng))
     add(".npz", _npz(points=OCTA_POINTS, faces=OCTA_FACES), _npz_cases())
     add(".json", json.dumps({"points": CONTOUR.tolist(), "closed": True}).encode(),

@@ -654,7 +654,8 @@ def test_mesh_unreadable(tmp_path):
     ("one.json", "[[0, 0]]", "only 1 node"),
     ("none.json", '{"points": []}', "no points"),
     ("wide.json", "[[0, 0, 0, 0], [1, 0, 0, 0], [0, 1, 0, 0]]", "got shape .3, 4."),
-    ("shape.xyz", "0 0\n1 0\n0 1\n", "unknown file extension '.xyz'; supported: .csv, .tsv"),
+    ("shape.xyz", "0 0\n1 0\n0 1\n", "line 1 has 2 columns, fewer than x, y, z"),
+    ("shape.pcd", "0 0\n1 0\n0 1\n", "unknown file extension '.pcd'; supported: .csv, .tsv"),
 ])
 def test_bad_files(tmp_path, name, content, message):
     path = tmp_path / name
@@ -704,8 +705,8 @@ def test_missing_file_directory_and_options(tmp_path):
 
 
 def test_write_points_errors(tmp_path):
-    with pytest.raises(ValueError, match="cannot write '.xyz' files; supported: .csv"):
-        write_points(tmp_path / "a.xyz", SQUARE)
+    with pytest.raises(ValueError, match="cannot write '.pcd' files; supported: .csv"):
+        write_points(tmp_path / "a.pcd", SQUARE)
     with pytest.raises(ValueError, match=r"points must have shape \(m, 2\) or \(m, 3\)"):
         write_points(tmp_path / "a.csv", np.zeros((3, 4)))
     assert not list(tmp_path.iterdir())
@@ -717,11 +718,11 @@ def test_write_points_errors(tmp_path):
 def test_every_file_problem_is_an_input_file_error(tmp_path):
     (tmp_path / "words.csv").write_text("x,y\n1,a\n")
     (tmp_path / "junk.npy").write_text("not numpy")  # numpy's own failure, named
-    (tmp_path / "a.xyz").write_text("1,2\n")
+    (tmp_path / "a.pcd").write_text("1,2\n")
     (tmp_path / "empty.json").write_text("")
     for name, message in [("nope.csv", "no such file"), ("words.csv", "line 2: 'a'"),
                           ("junk.npy", "cannot read it as a .npy file"),
-                          ("a.xyz", "unknown file extension"),
+                          ("a.pcd", "unknown file extension"),
                           ("empty.json", "the file is empty")]:
         with pytest.raises(InputFileError, match=_err(tmp_path / name) + message):
             read_shape(tmp_path / name)
@@ -942,3 +943,15 @@ def test_missing_optional_library(tmp_path, monkeypatch, module, filename, extra
     (tmp_path / filename).write_bytes(b"something")
     with pytest.raises(ImportError, match=re.escape(f"pip install '{extra}'")):
         read_shape(tmp_path / filename)
+
+
+def test_xyz_point_cloud_leaves_its_attributes_out(tmp_path):
+    """An ASCII XYZ cloud: x y z first, then colours or normals, left out."""
+    rng = np.random.default_rng(5)
+    u = rng.normal(size=(60, 3))
+    pts = u / np.linalg.norm(u, axis=1, keepdims=True)
+    path = tmp_path / "cloud.xyz"
+    np.savetxt(path, np.c_[pts, pts, rng.integers(0, 255, (60, 3))], fmt="%.9f")
+    shape = read_shape(path)
+    assert shape.dim == 3 and not shape.ordered
+    assert_allclose(shape.points, pts, atol=1e-9)

@@ -5,7 +5,7 @@
 =====================================  ==================================  ==============
 extensions                             content                             module
 =====================================  ==================================  ==============
-``.csv`` ``.tsv`` ``.txt``             ``x, y[, z]`` per row               :mod:`.points`
+``.csv`` ``.tsv`` ``.txt`` ``.xyz``    ``x, y[, z]`` per row               :mod:`.points`
 ``.npy`` ``.npz``                      an (m, d) array                     :mod:`.points`
 ``.json``                              ``[[x, y], ...]`` or an object      :mod:`.points`
 ``.svg``                               one outline (path, polygon, etc.)   :mod:`.svg`
@@ -86,7 +86,7 @@ from .images import (
 )
 from .meshes import read_mesh
 from .nifti import read_nifti
-from .points import read_json, read_npy, read_npz, read_text, write_points
+from .points import read_json, read_npy, read_npz, read_text, read_xyz, write_points
 from .results import result_summary, save_result, save_track
 from .sequences import Frames, check_grids, file_frames, sequence_files
 from .steps import MESH_FORMATS, write_step_meshes
@@ -127,7 +127,7 @@ __all__ = [
 
 # THE reader table: a file's extension (lower case) -> the function reading it.
 READERS: dict[str, Reader] = {
-    ".csv": read_text, ".tsv": read_text, ".txt": read_text,
+    ".csv": read_text, ".tsv": read_text, ".txt": read_text, ".xyz": read_xyz,
     ".npy": read_npy, ".npz": read_npz,
     ".json": read_json,
     ".svg": read_svg,

@@ -6,6 +6,8 @@
   and others ignored, but a ``contour`` column: the contour of each node (a shape of
   several contours, a ring's outer boundary and hole; each contour's rows consecutive).
   Blank lines and lines starting with ``#`` are skipped.
+- ``.xyz``: the same text, ``x y z`` first on each line, then any attributes (colours,
+  normals), left out.
 - ``.npy``: an (m, 2) or (m, 3) array; ``.npz``: the array ``points`` (or the only array
   in the file), and optionally ``faces``, ``closed`` and ``contours`` (node counts).
 - ``.json``: a list ``[[x, y], ...]`` or an object ``{"points": [...], "closed": bool,
@@ -31,7 +33,7 @@ from .atomic import atomic_write
 from .base import RawShape
 
 __all__ = ["TEXT_SEPARATORS", "WRITABLE", "contour_runs", "load_npy", "npz_arrays", "parse_float",
-           "read_json", "read_npy", "read_npz", "read_text", "write_points"]
+           "read_json", "read_npy", "read_npz", "read_text", "read_xyz", "write_points"]
 
 # The text formats written, with their column separator (any is read).
 TEXT_SEPARATORS = {".csv": ",", ".tsv": "\t", ".txt": " "}
@@ -42,8 +44,15 @@ def parse_float(text: str) -> float:
     return float(text.strip().strip("\"'"))
 
 
-def read_text(path: Path, name: str, options: ReadOptions) -> RawShape:
-    """A text file's nodes (see the module's docstring)."""
+def read_xyz(path: Path, name: str, options: ReadOptions) -> RawShape:
+    """An ASCII XYZ point cloud (CloudCompare, MeshLab, Open3D): ``x y z`` first on each
+    line, then any attributes (colour, normal, intensity), which are left out."""
+    return read_text(path, name, options, xyz=True)
+
+
+def read_text(path: Path, name: str, options: ReadOptions, xyz: bool = False) -> RawShape:
+    """A text file's nodes (see the module's docstring); ``xyz``: the first three columns
+    of each line, whatever follows them."""
     try:
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -62,7 +71,7 @@ def read_text(path: Path, name: str, options: ReadOptions) -> RawShape:
         parts = [p.strip() for p in parts]
         return [p.replace(",", ".") for p in parts] if sep == ";" else parts
 
-    columns = None  # indices of x, y[, z] (then contour) when a header names them
+    columns = [0, 1, 2] if xyz else None  # of x, y[, z] (then contour) if a header names them
     header = fields(first)
     names = [h.strip("\"'").strip().lower() for h in header]
     if not any(_is_number(f) for f in header):
@@ -84,7 +93,7 @@ def read_text(path: Path, name: str, options: ReadOptions) -> RawShape:
                                  f"{width} like line {lines[0][0]}")
         if columns is not None and max(columns) >= len(parts):
             raise InputFileError(f"{name}: line {lineno} has {len(parts)} columns, fewer than "
-                                 f"the header names")
+                                 f"{'x, y, z' if xyz else 'the header names'}")
         row = []
         for k in columns if columns is not None else range(len(parts)):
             try:
