@@ -42,6 +42,10 @@ from ._draw import (
 MAX_FIGURE_SHAPES = 30  # steps drawn at most (heart PNG: 0.56 s with 34 shapes, 1.14 s with 101)
 FIGURE_DPI = 150  # PNGs of 960 x 810 px (heart energy figure: 0.56 s at 150 dpi, 0.71 s at 200)
 RASTER_SEGMENTS = 1000  # more go into SVG/PDF as an image (a vector segment costs 0.12 ms)
+# 3D node markers shrink in area beyond this many nodes, their ink as this many's: the
+# target's 4278 squares of a voxel surface hid the final surface and its energy colours;
+# the bunny's 1839 half hid them (shapes_energy.png, looked at).
+MARKED_NODES = 1000
 
 
 # -------------------------------------------------------------------------- steps
@@ -268,13 +272,14 @@ def _draw_ends(ax, target, start, tgt) -> bool:
     _, t_closed, t_ordered, t_faces, t_sizes = describe(target, "morph.target")
     dim = start.shape[1]
     size = 9 if dim == 2 else 5
-    ax.scatter(*start.T, s=size, c=SOURCE_COLOR, marker="o", linewidths=0, zorder=4)
+    shrink = 1.0 if dim == 2 else min(1.0, MARKED_NODES / max(len(start), len(tgt)))
+    ax.scatter(*start.T, s=size * shrink, c=SOURCE_COLOR, marker="o", linewidths=0, zorder=4)
     t_edges = edges_of(len(tgt), t_closed, t_ordered, t_faces, t_sizes)
     if len(t_edges) and t_faces is None:
         ax.add_collection(line_collection(tgt[t_edges], ax, colors=TARGET_COLOR,
                                           linewidths=1.0, linestyles="--", zorder=4))
-    ax.scatter(*tgt.T, s=size + 3, c=TARGET_COLOR, marker="s", linewidths=0, zorder=5,
-               alpha=1.0 if dim == 2 else 0.6)
+    ax.scatter(*tgt.T, s=(size + 3) * shrink, c=TARGET_COLOR, marker="s", linewidths=0,
+               zorder=5, alpha=1.0 if dim == 2 else 0.6)
     return bool(len(t_edges)) and t_faces is None
 
 
