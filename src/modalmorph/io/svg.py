@@ -131,7 +131,7 @@ def _shapes(se, svg, name: str) -> tuple[list, list]:
     if not drawn:
         raise InputFileError(f"{name}: no {', '.join(f'<{t}>' for t in _SVG_TAGS[:-1])} or "
                              f"<{_SVG_TAGS[-1]}> element")
-    shown = [e for e in drawn if _shows(e)] or drawn  # nothing shows: the first drawn
+    shown = [e for e in drawn if _shows(e)] or drawn  # nothing shows: all drawn
     page = se.Color(PAGE_COLOR)
     if len(shown) > 1 and _covers_page(svg, shown[0]):
         page, shown = (shown[0].fill if _paints(shown[0].fill) else page), shown[1:]
