@@ -227,7 +227,8 @@ def crossing_segments(points, closed: bool = True, *, edges=None) -> np.ndarray:
         i, j = i[keep], j[keep]
         cross = ((orient(a[i], b[i], a[j]) * orient(a[i], b[i], b[j]) < 0)
                  & (orient(a[j], b[j], a[i]) * orient(a[j], b[j], b[i]) < 0))
-        found.append(np.sort(np.c_[i[cross], j[cross]], axis=1))
+        if cross.any():  # most contours cross nowhere: no sort, no unique (15 us at 70 nodes)
+            found.append(np.sort(np.c_[i[cross], j[cross]], axis=1))
     return np.unique(np.vstack(found), axis=0).astype(np.intp) if found else \
         np.empty((0, 2), dtype=np.intp)
 
