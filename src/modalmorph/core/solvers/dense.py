@@ -55,10 +55,8 @@ def whitened(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     order (an eigensolver may overwrite it), after Gamma's conditioning check: a bound
     from its factor (:func:`~modalmorph.core.element.condition_bound`), or where that is
     not small enough its eigenvalues, refuse a sigma too large for the node set."""
-    G, Gamma = model.gram
-    L, info = lapack.dpotrf(Gamma, lower=1, clean=1)
-    if info == 0:
-        Linv, info = lapack.dtrtri(L, lower=1)
+    Gamma = model.gram[1]
+    L, Linv, info = model.take_gamma_factor()  # dpotrf, then dtrtri
     # the exact condition number only where the bound does not show it small enough
     if info != 0 or not condition_bound(Gamma, Linv) < MAX_CONDITION:
         cond = model.gamma_condition
