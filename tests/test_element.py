@@ -221,3 +221,29 @@ def test_stiffness_matrix_by_rows_is_the_whole_array_bitwise(monkeypatch, d, ord
         assert np.array_equal(K, whole)
     for a, b in zip((r, r2, gamma), kept, strict=True):
         assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("nominal", [2.0, 3.5])
+def test_auto_sigma_on_the_model_s_own_factor(hand200, monkeypatch, nominal):
+    """FEModel(sigma=None) takes auto_sigma's width whether its own Gamma shows the
+    nominal one well conditioned (2.0) or not (3.5: regula falsi below it); a dense model
+    at the nominal width factors Gamma once, for the check and the whitening both, and
+    the whitening made twice is the same numbers."""
+    from scipy.linalg import lapack
+
+    from modalmorph.core.element import auto_sigma
+    from modalmorph.core.solvers.dense import whitened
+
+    calls = []
+    real = lapack.dpotrf
+    monkeypatch.setattr(lapack, "dpotrf", lambda *a, **k: calls.append(1) or real(*a, **k))
+    model = FEModel(hand200, sigma=None, nominal_sigma=nominal)
+    first = whitened(model)
+    monkeypatch.setattr(lapack, "dpotrf", real)
+    assert model.sigma == auto_sigma(hand200, nominal)
+    if nominal == 2.0:
+        assert model.sigma == nominal and len(calls) == 1
+    else:
+        assert model.sigma < nominal
+    for a, b in zip(first, whitened(model), strict=True):
+        assert np.array_equal(a, b)

@@ -104,7 +104,7 @@ class Similarity:
 
 def _quaternion_matrix(S: np.ndarray) -> np.ndarray:
     """Horn's symmetric 4 x 4 matrix N from the 3 x 3 cross-covariance S."""
-    (sxx, sxy, sxz), (syx, syy, syz), (szx, szy, szz) = S
+    (sxx, sxy, sxz), (syx, syy, syz), (szx, szy, szz) = S.tolist()  # floats: the same sums
     return np.array([
         [sxx + syy + szz, syz - szy, szx - sxz, sxy - syx],
         [syz - szy, sxx - syy - szz, sxy + syx, szx + sxz],
@@ -114,7 +114,7 @@ def _quaternion_matrix(S: np.ndarray) -> np.ndarray:
 
 
 def _rotation_from_quaternion(q: np.ndarray) -> np.ndarray:
-    q0, qx, qy, qz = q / np.linalg.norm(q)
+    q0, qx, qy, qz = (q / np.linalg.norm(q)).tolist()
     return np.array([
         [q0**2 + qx**2 - qy**2 - qz**2, 2 * (qx * qy - q0 * qz), 2 * (qx * qz + q0 * qy)],
         [2 * (qy * qx + q0 * qz), q0**2 - qx**2 + qy**2 - qz**2, 2 * (qy * qz - q0 * qx)],
@@ -168,7 +168,7 @@ def align(source_points, target_points, *, scale: bool = True,
         raise ShapeError("source_points all coincide: the similarity is undetermined")
     cl = cl / unit_l
     cr = cr / unit_r if unit_r > 0 else cr
-    norm_l, norm_r = np.sum(cl**2), np.sum(cr**2)
+    norm_l, norm_r = np.add.reduce(cl**2, axis=None), np.add.reduce(cr**2, axis=None)
     R = _rotation(cl, cr) if rotate else np.eye(d)
     with np.errstate(over="ignore", invalid="ignore"):
         s = float(np.sqrt(norm_r / norm_l) * (unit_r / unit_l)) if scale else 1.0  # symmetric
@@ -201,8 +201,9 @@ def _corresponding(source_points, target_points) -> tuple[np.ndarray, np.ndarray
 
 def _mean(a: np.ndarray) -> np.ndarray:
     """Column means without overflow for coordinates near the float64 limit."""
-    big = np.abs(a).max()
-    return a.mean(axis=0) if big < 1e300 else (a / big).mean(axis=0) * big
+    big = np.abs(a).max()  # the sum over rows / k: np.mean's numbers, without its wrapper
+    return np.add.reduce(a, axis=0) / len(a) if big < 1e300 else \
+        np.add.reduce(a / big, axis=0) / len(a) * big
 
 
 def _rotation(cl: np.ndarray, cr: np.ndarray) -> np.ndarray:
@@ -213,12 +214,13 @@ def _rotation(cl: np.ndarray, cr: np.ndarray) -> np.ndarray:
         cl3, cr3 = np.concatenate([cl, z], axis=1), np.concatenate([cr, z], axis=1)
     else:
         cl3, cr3 = cl, cr
-    N = _quaternion_matrix(cl3.T @ cr3)  # S_ab = sum l_a r_b
+    S = cl3.T @ cr3  # S_ab = sum l_a r_b
     if d == 2:  # rotations about z only: quaternions (q0, 0, 0, qz); no reflections
-        sub = np.array([[N[0, 0], N[0, 3]], [N[3, 0], N[3, 3]]])
+        (sxx, sxy, _), (syx, syy, _), (_, _, szz) = S.tolist()  # N's entries used, as N has them
+        sub = np.array([[sxx + syy + szz, sxy - syx], [sxy - syx, -sxx - syy + szz]])
         _, vec = np.linalg.eigh(sub)
         q = np.array([vec[0, -1], 0.0, 0.0, vec[1, -1]])
     else:
-        _, vec = np.linalg.eigh(N)
+        _, vec = np.linalg.eigh(_quaternion_matrix(S))
         q = vec[:, -1]  # eigenvector of the largest eigenvalue
     return _rotation_from_quaternion(q)[:d, :d]

@@ -197,18 +197,24 @@ def _stiffness(r: np.ndarray, sigma: float, lam: float, mu: float,
 
 def _blocks(r, sigma, lam, mu, pairs, r2, gamma, out) -> list[np.ndarray]:
     """:func:`_stiffness`'s blocks for offsets ``r`` with their ``r2`` and ``gamma``
-    (written to ``out[a, :, b]`` for ``out`` (d, rows, d, m), or new arrays)."""
+    (also written to ``out[a, :, b]`` for ``out`` (d, rows, d, m))."""
     d = r.shape[-1]
     scale = gamma / sigma**4
     diag = (lam + mu) * sigma**2 / 2 + mu * (d * sigma**2 / 2 - r2 / 4)
+    # into ``out`` (a dense K_g, a chunk of rows): each component read contiguous once,
+    # each block made contiguous and copied in place: 123 -> 74 us at 70 nodes in Fortran
+    # order (strided reads and writes before), the same numbers; else views (no copies)
+    comp = [np.ascontiguousarray(r[..., a]) if out is not None else r[..., a]
+            for a in range(d)]
     blocks = []
     for a, b in pairs:
-        v = None if out is None else out[a, :, b]
-        v = np.multiply(-(lam + mu) / 4, r[..., a], out=v)
-        v *= r[..., b]
+        v = np.multiply(-(lam + mu) / 4, comp[a])
+        v *= comp[b]
         if a == b:
             v += diag
         v *= scale
+        if out is not None:
+            out[a, :, b] = v
         blocks.append(v)
     return blocks
 

@@ -23,9 +23,12 @@ from scipy.spatial import cKDTree
 from ..errors import ModelError, OptionError
 from . import solvers
 from .element import (
+    AUTO_CONDITION,
+    AUTO_DENSE_MAX_DOF,
     DEFAULT_SIGMA,
     auto_sigma_condition,
     check_sigma,
+    condition_bound,
     cutoff_radius,
     gaussian,
     gram_entries,
@@ -124,9 +127,13 @@ class FEModel:
         self._solver = solvers.choose(solver, self.shape.dim, self.shape.m)
         self.cutoff = float(self._solver.cutoff if cutoff is None else cutoff)
         if sigma is None:
-            self.sigma, log_cond = auto_sigma_condition(self.shape, nominal_sigma)
-            if log_cond is not None:  # measured on the way: no second eigensolve
-                self.__dict__["gamma_condition"] = 10.0**log_cond
+            self.sigma = float(nominal_sigma)
+            if not self._nominal_conditioned():
+                for name in ("width", "gram", "_gamma_factor"):  # made at the nominal sigma
+                    self.__dict__.pop(name, None)
+                self.sigma, log_cond = auto_sigma_condition(self.shape, nominal_sigma)
+                if log_cond is not None:  # measured on the way: no second eigensolve
+                    self.__dict__["gamma_condition"] = 10.0**log_cond
         else:
             self.sigma = float(sigma)
         self.material = material
@@ -138,6 +145,35 @@ class FEModel:
                 raise OptionError(f"plane must be 'stress' or 'strain', got {plane!r}")
             self.lame = material.lame
         self._modes = {}
+
+    def _nominal_conditioned(self) -> bool:
+        """Whether a dense model's own ``Gamma`` at ``self.sigma`` (the nominal width) is
+        shown well conditioned by :func:`~modalmorph.core.element.condition_bound` (at
+        most ``AUTO_CONDITION``): the first test of
+        :func:`~modalmorph.core.element.auto_sigma_condition`, whose answer is then the
+        nominal width, made on the Cholesky factor the dense solver's whitening uses
+        (kept for it, :meth:`take_gamma_factor`), not on a second one."""
+        if self._solver.name != "dense" or self.dim * self.m > AUTO_DENSE_MAX_DOF:
+            return False
+        _, l_inv, info = self._gamma_factor
+        return info == 0 and condition_bound(self.gram[1], l_inv) <= AUTO_CONDITION
+
+    @cached_property
+    def _gamma_factor(self) -> tuple[np.ndarray, np.ndarray | None, int]:
+        G, Gamma = self.gram
+        L, info = lapack.dpotrf(Gamma, lower=1, clean=1)
+        l_inv = None
+        if info == 0:
+            l_inv, info = lapack.dtrtri(L, lower=1)
+        return L, l_inv, info
+
+    def take_gamma_factor(self) -> tuple[np.ndarray, np.ndarray | None, int]:
+        """``(L, L^-1, info)``: the lower Cholesky factor of the dense ``Gamma``, its
+        inverse (None when the factor failed) and LAPACK's ``info`` (0: both made);
+        handed over: the model keeps neither (a made one is not made twice)."""
+        out = self._gamma_factor
+        del self.__dict__["_gamma_factor"]
+        return out
 
     @property
     def solver(self) -> str:

@@ -47,11 +47,12 @@ def area(points) -> float:
 
 def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Distance from points ``p`` to segments ``a``-``b`` (broadcast over leading axes)."""
-    ab = b - a
-    den = np.sum(ab * ab, axis=-1)
-    t = np.sum((p - a) * ab, axis=-1) / np.where(den > 0, den, 1.0)
+    ab = b - a  # np.sum and np.linalg.norm's numbers, by the ufuncs they call
+    den = np.add.reduce(ab * ab, axis=-1)
+    t = np.add.reduce((p - a) * ab, axis=-1) / np.where(den > 0, den, 1.0)
     t = np.clip(t, 0.0, 1.0)[..., None]
-    return np.linalg.norm(p - (a + t * ab), axis=-1)
+    r = p - (a + t * ab)
+    return np.sqrt(np.add.reduce(r * r, axis=-1))
 
 
 class Polyline:
@@ -69,8 +70,8 @@ class Polyline:
         n = len(points)
         self.n_seg = n if closed else n - 1
         self.closed = closed
-        self.end = np.roll(points, -1, axis=0)  # segment j runs from node j to node j+1
-        self.reach2 = 0.25 * float(np.max(np.sum(
+        self.end = np.concatenate([points[1:], points[:1]])  # segment j: node j to j + 1
+        self.reach2 = 0.25 * float(np.maximum.reduce(np.add.reduce(
             (self.end[:self.n_seg] - points[:self.n_seg]) ** 2, axis=1)))
         self.tree = cKDTree(points)
 
@@ -227,7 +228,8 @@ def crossing_segments(points, closed: bool = True, *, edges=None) -> np.ndarray:
         i, j = i[keep], j[keep]
         cross = ((orient(a[i], b[i], a[j]) * orient(a[i], b[i], b[j]) < 0)
                  & (orient(a[j], b[j], a[i]) * orient(a[j], b[j], b[i]) < 0))
-        found.append(np.sort(np.c_[i[cross], j[cross]], axis=1))
+        if cross.any():  # most contours cross nowhere: no sort, no unique (15 us at 70 nodes)
+            found.append(np.sort(np.c_[i[cross], j[cross]], axis=1))
     return np.unique(np.vstack(found), axis=0).astype(np.intp) if found else \
         np.empty((0, 2), dtype=np.intp)
 

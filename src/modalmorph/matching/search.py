@@ -148,7 +148,7 @@ def pairs_at(costs: Costs, z: np.ndarray, rows: np.ndarray):
     x, y = z[rows], costs.y
     if costs.ordered:
         from ._dp import placed_search
-        xx, yy = np.sum(x**2, axis=1), np.sum(y**2, axis=1)  # as features.sq_dist
+        xx, yy = np.add.reduce(x**2, axis=1), np.add.reduce(y**2, axis=1)  # as sq_dist
         j, cost = placed_search(xx, yy, 2 * x @ y.T, costs.F, np.asarray(rows, np.intp),
                                 float(costs.h2), (SKIP, float(costs.repeat), bool(costs.closed)))
         return _pairs_from_j(j, cost, one_to_one=not costs.many)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy import linalg
 from scipy.linalg import blas, lapack
@@ -17,6 +19,11 @@ _SUBSET_FRACTION, _SUBSET_MIN = 0.15, 200
 # 128 KiB mmap threshold): at n = 2400, one thread, 6.2 ms against 7.0 with tiles of 64,
 # 12.6-15.1 with 256-512 and 11.0 for the whole-array expression (n = 800: 0.52 / 0.63).
 _TILE = 120
+# dsyevd rescales a matrix whose largest entry lies outside [RMIN, RMAX] = [sqrt(tiny /
+# eps), sqrt(eps / tiny)], dstevd a tridiagonal likewise; _evd_lowest runs where neither
+# does (an n x n matrix's tridiagonal's largest entry is within n of the matrix's).
+_SAFE_MIN = np.sqrt(np.finfo(float).tiny / np.finfo(float).eps)
+_SAFE_MAX = 1.0 / _SAFE_MIN
 
 
 def solve(model, n: int) -> Modes:
@@ -48,10 +55,8 @@ def whitened(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     order (an eigensolver may overwrite it), after Gamma's conditioning check: a bound
     from its factor (:func:`~modalmorph.core.element.condition_bound`), or where that is
     not small enough its eigenvalues, refuse a sigma too large for the node set."""
-    G, Gamma = model.gram
-    L, info = lapack.dpotrf(Gamma, lower=1, clean=1)
-    if info == 0:
-        Linv, info = lapack.dtrtri(L, lower=1)
+    Gamma = model.gram[1]
+    L, Linv, info = model.take_gamma_factor()  # dpotrf, then dtrtri
     # the exact condition number only where the bound does not show it small enough
     if info != 0 or not condition_bound(Gamma, Linv) < MAX_CONDITION:
         cond = model.gamma_condition
@@ -92,5 +97,43 @@ def _eigh_lowest(A: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     if n <= _SUBSET_FRACTION * N and N >= _SUBSET_MIN:
         return linalg.eigh(A, subset_by_index=(0, n - 1), driver="evr", check_finite=False,
                            overwrite_a=True)
+    if n < N and _SAFE_MIN * N < np.abs(A).max() < _SAFE_MAX / N:
+        return _evd_lowest(A, n)
     w, V = linalg.eigh(A, driver="evd", check_finite=False, overwrite_a=True)
     return w[:n], V[:, :n]
+
+
+def _evd_lowest(A: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """LAPACK's ``dsyevd`` (lower) in its three steps, its last on ``n`` columns only:
+    the tridiagonal reduction ``dsytrd``, every eigenpair of the tridiagonal by divide and
+    conquer (``dstevd``: the ``dstedc`` that ``dsyevd`` calls) and the reflectors
+    applied to the lowest ``n`` (``dormqr`` on the rows below the first, as ``dormtr``
+    does), not to all of them. The same numbers as ``eigh(driver="evd")`` (bitwise on
+    212 matching models of the speed corpus, 140 and 300 degrees of freedom) for ``A``
+    within the range ``dsyevd`` does not rescale (:data:`_SAFE_MIN`, :data:`_SAFE_MAX`);
+    140 x 140, 24 modes, one thread: 1.00 -> 0.85 ms. ``A`` is overwritten."""
+    N = A.shape[0]
+    c, d, e, tau, info = lapack.dsytrd(A, lower=1, lwork=_lwork(lapack.dsytrd_lwork, N, 1),
+                                       overwrite_a=1)
+    if info == 0:
+        w, Z, info = lapack.dstevd(d, e, compute_v=1, overwrite_d=1, overwrite_e=1)
+    if info != 0:
+        raise linalg.LinAlgError(f"the dense eigensolver failed (LAPACK info {info})")
+    Z = np.asfortranarray(Z[:, :n])  # Q = diag(1, Q1), Q1 the reflectors below the first row
+    Z[1:], _, info = lapack.dormqr("L", "N", c[1:, :N - 1], tau[:N - 1], Z[1:],
+                                   _dormqr_lwork(N, n), overwrite_c=1)
+    return w[:n], Z
+
+
+@functools.cache
+def _lwork(query, *args) -> int:
+    """The optimal workspace of a LAPACK routine (its ``*_lwork`` query), per size."""
+    return int(query(*args)[0])
+
+
+@functools.cache
+def _dormqr_lwork(N: int, n: int) -> int:
+    """``dormqr``'s optimal workspace for ``N - 1`` reflectors applied to ``n`` columns."""
+    a = np.zeros((N - 1, N - 1), order="F")
+    return int(lapack.dormqr("L", "N", a, np.zeros(N - 1), np.zeros((N - 1, n), order="F"),
+                             -1)[1][0])
