@@ -89,13 +89,17 @@ MULTILEVEL_MAXITER = 100
 # Stalled: the residual fell by less than _STALL_FACTOR over this many iterations (method.md §7).
 _STALL_WINDOW = 10
 _STALL_FACTOR = 0.9
-# Nodes per preconditioner patch: dense (d * 32)^2 Cholesky factors, 9 * 32 doubles per
+# Nodes per preconditioner patch: dense (d * 32)^2 inverses, 9 * 32 doubles per
 # 3D node in all (0.23 GB at 100k nodes).
 _PATCH_NODES = 32
 # Patches per batched product in the preconditioner (a few MB of temporaries each).
 _PATCH_BATCH = 256
 # Rows per chunk of the dense block operations in LOBPCG (a few MB of temporaries each).
 _ROWS = 4096
+# Rows per block of the sparse products: products of 100 000 nodes times 62 columns in
+# blocks of 6250 rows take 536 ms (K_g) against 582 in one block, one thread (the
+# products' results stay small and are reused instead of mapped afresh).
+_SPARSE_ROWS = 8192
 # Points per chunk of the coarse modes' fields at the fine nodes.
 _FIELD_CHUNK = 16384
 # Threads of the sparse and dense block products (2 cores; results equal to round-off).
@@ -256,9 +260,9 @@ class Operators:
     ``K_g`` is stored as its ``d (d + 1) / 2`` distinct scalar m x m components
     ``K^ab`` (:func:`modalmorph.core.element.stiffness_components`), ``Gamma`` as one more, all
     over one sparse structure (the pairs within the cutoff and the diagonal). The rows are
-    split into ``threads`` blocks of about equal nonzeros, each with its own index arrays;
-    a product
-    runs one block per thread (scipy's sparse products release the GIL), each block
+    split into blocks of about equal nonzeros (a multiple of ``threads`` of them, at most
+    ``_SPARSE_ROWS`` rows each), each with its own index arrays; a product runs the
+    blocks on ``threads`` threads (scipy's sparse products release the GIL), each block
     computing ``(K X)_a = sum_b K^ab X_b`` for its rows.
     """
 
@@ -279,7 +283,9 @@ class Operators:
         indptr, indices = pattern.indptr, pattern.indices
         del pattern
         nnz = int(indptr[-1])
-        cuts = np.searchsorted(indptr, np.arange(threads + 1) * (nnz / threads))
+        # blocks of at most _SPARSE_ROWS rows, a multiple of threads of them
+        parts = threads * -(-m // (threads * _SPARSE_ROWS))
+        cuts = np.searchsorted(indptr, np.arange(parts + 1) * (nnz / parts))
         cuts[0], cuts[-1] = 0, m
         cuts = np.unique(cuts)
         self.blocks = []
@@ -384,8 +390,8 @@ def _patch_preconditioner(model, order: np.ndarray, pool: ThreadPoolExecutor,
                           threads: int):
     """Block Jacobi: exact solves with ``K_g`` restricted to patches of ``_PATCH_NODES``
     consecutive nodes of the solver's order (leaves of a k-d tree, so neighbours), on
-    component-major blocks. Each patch's inverse Cholesky factor ``L^-1`` is stored and
-    the solves are batched products ``L^-T (L^-1 R)``, batches of patches over the
+    component-major blocks. Each patch's inverse ``A^-1 = L^-T L^-1`` (from its Cholesky
+    factor) is stored and the solves are batched products ``A^-1 R``, batches of patches over the
     threads."""
     d, m = model.dim, model.m
     lam, mu = model.lame
@@ -400,9 +406,10 @@ def _patch_preconditioner(model, order: np.ndarray, pool: ThreadPoolExecutor,
         A = blocks.transpose(2, 0, 3, 1).reshape(d * len(y), d * len(y))
         A[np.diag_indices_from(A)] *= 1 + 1e-8  # K_g is only semi-definite numerically
         L = linalg.cholesky(A, lower=True, check_finite=False)
-        return linalg.solve_triangular(L, np.eye(len(L)), lower=True, check_finite=False)
+        Li = linalg.solve_triangular(L, np.eye(len(L)), lower=True, check_finite=False)
+        return Li.T @ Li  # A^-1: one product per solve instead of two triangular ones
 
-    Linv = np.stack([inverse_factor(s) for s in starts[:full]])
+    Ainv = np.stack([inverse_factor(s) for s in starts[:full]])
     last = inverse_factor(full * P) if full * P < m else None
     batches = [(b, min(b + _PATCH_BATCH, full)) for b in range(0, full, _PATCH_BATCH)]
 
@@ -415,9 +422,7 @@ def _patch_preconditioner(model, order: np.ndarray, pool: ThreadPoolExecutor,
             for b0, b1 in batches[t::threads]:
                 # (d, patches, P, k) -> (patches, d*P, k): each patch component-major
                 Rp = Rs[:, b0 * P:b1 * P].reshape(d, b1 - b0, P, k).transpose(1, 0, 2, 3)
-                Li = Linv[b0:b1]
-                Y = np.matmul(Li.transpose(0, 2, 1),
-                              np.matmul(Li, Rp.reshape(b1 - b0, d * P, k)))
+                Y = np.matmul(Ainv[b0:b1], Rp.reshape(b1 - b0, d * P, k))
                 out[:, b0 * P:b1 * P] = Y.reshape(b1 - b0, d, P, k).transpose(
                     1, 0, 2, 3).reshape(d, (b1 - b0) * P, k)
 
@@ -425,7 +430,7 @@ def _patch_preconditioner(model, order: np.ndarray, pool: ThreadPoolExecutor,
             pass
         if last is not None:
             r = Rs[:, full * P:].reshape(-1, k)
-            out[:, full * P:] = (last.T @ (last @ r)).reshape(d, m - full * P, k)
+            out[:, full * P:] = (last @ r).reshape(d, m - full * P, k)
         return out.reshape(R.shape)
 
     return apply
@@ -472,7 +477,7 @@ class _Rows:
             for i, a in enumerate(S):
                 for j, b in enumerate(T):
                     if not symmetric or j >= i:
-                        blocks[i][j] = a[rows].T @ b[rows]
+                        blocks[i][j] = _take(a, rows).T @ b[rows]
             for i in range(len(S)):
                 for j in range(i if symmetric else 0):
                     blocks[i][j] = blocks[j][i].T
@@ -480,14 +485,18 @@ class _Rows:
 
         return sum(self.map(part))
 
-    def norms(self, X: np.ndarray, w2: np.ndarray | None = None,
-              MX: np.ndarray | None = None) -> np.ndarray:
-        """Euclidean norms of the columns of ``X``, or of ``X - MX diag(w2)``."""
-        def part(rows):
-            Y = X[rows] if MX is None else X[rows] - MX[rows] * w2
-            return np.einsum("ij,ij->j", Y, Y)
+    def residuals(self, KX: np.ndarray, MX: np.ndarray, w2: np.ndarray):
+        """``(R, res)`` in one pass: the residuals ``R = K X - M X diag(w2)`` and their
+        relative norms ``||R|| / (|w2| ||M X||)``, column by column."""
+        R = np.empty_like(KX)
 
-        return np.sqrt(sum(self.map(part)))
+        def part(rows):
+            R[rows] = KX[rows] - MX[rows] * w2
+            return np.stack([np.einsum("ij,ij->j", R[rows], R[rows]),
+                             np.einsum("ij,ij->j", MX[rows], MX[rows])])
+
+        r2, m2 = np.sqrt(sum(self.map(part)))
+        return R, r2 / (np.abs(w2) * m2)
 
     def each(self, fn) -> None:
         """``fn(rows)`` for every chunk."""
@@ -504,17 +513,6 @@ class _Rows:
 
         self.each(part)
 
-    def residual(self, KX: np.ndarray, MX: np.ndarray, w2: np.ndarray,
-                 cols: np.ndarray) -> np.ndarray:
-        """``(KX - MX diag(w2))[:, cols]``."""
-        R = np.empty((KX.shape[0], len(cols)))
-
-        def part(rows):
-            R[rows] = KX[rows][:, cols] - MX[rows][:, cols] * w2[cols]
-
-        self.each(part)
-        return R
-
     def subtract(self, W: np.ndarray, X: np.ndarray, H: np.ndarray) -> None:
         """``W <- W - X H`` in place."""
         def part(rows):
@@ -523,14 +521,14 @@ class _Rows:
         self.each(part)
 
     def ritz_update(self, blocks, Cx: np.ndarray, Cw: np.ndarray,
-                    Cp: np.ndarray | None) -> None:
-        """For each ``(Y, Z, Q)`` of ``blocks``, in place: ``Q <- Z Cw + Q Cp`` (``Q Cp``
-        left out when ``Cp`` is None) and then ``Y <- Y Cx + Q``."""
+                    Cp: np.ndarray | None, cols=slice(None)) -> None:
+        """For each ``(Y, Z, Q)`` of ``blocks``, in place: ``Q <- Z Cw + Q[:, cols] Cp``
+        (left out when ``Cp`` is None) and then ``Y <- Y Cx + Q``."""
         def part(rows):
             for Y, Z, Q in blocks:
                 q = Z[rows] @ Cw
                 if Cp is not None:
-                    q += Q[rows] @ Cp
+                    q += Q[rows][:, cols] @ Cp
                 Q[rows] = q
                 q += Y[rows] @ Cx
                 Y[rows] = q
@@ -544,44 +542,88 @@ def _lobpcg(ops, precondition, V, n, tol, maxiter, rows, clock):
     once used). ``ops.stiffness`` and ``ops.mass`` apply K and M (an :class:`Operators`),
     ``rows`` is a :class:`_Rows` and ``clock`` a :class:`_Clock`. Products
     with K and M are done once per new block and carried through the Ritz updates, in
-    place. Returns ``(w2, X, residuals, iterations)``."""
+    place; the Gram blocks of the Ritz vectors ``X`` and the directions ``P`` are known
+    from the last Rayleigh-Ritz (:func:`_carried`), so each iteration forms only those
+    of the new block ``W``. Returns ``(w2, X, residuals, iterations)``."""
     K, apply_m = ops.stiffness, ops.mass
-    V = V.pop()
-    k = V.shape[1]
-    KV, MV = K(V), apply_m(V)
-    w2, C = _rayleigh_ritz(rows.inner([V], [KV]), rows.inner([V], [MV]), k)
-    for Y in (V, KV, MV):
+    X = V.pop()
+    k = X.shape[1]
+    KX, MX = K(X), apply_m(X)
+    A, B = rows.inner([X], [KX], symmetric=True), rows.inner([X], [MX], symmetric=True)
+    w2, C = _rayleigh_ritz(A, B, k)
+    for Y in (X, KX, MX):
         rows.times(Y, C)
-    X, KX, MX = V, KV, MV
-    del V, KV, MV
+    known = _carried(A, B, C, 0)
     P = KP = MP = None
     best = []  # the lowest largest wanted residual so far, per iteration
     for it in range(maxiter + 1):
-        # relative residuals ||K x - w2 M x|| / (w2 ||M x||), without the block K X - M X w2
-        res = rows.norms(KX, w2, MX) / (np.abs(w2) * rows.norms(MX))
+        # relative residuals ||K x - w2 M x|| / (w2 ||M x||)
+        R, res = rows.residuals(KX, MX, w2)
         clock(f"LOBPCG {it}")
-        logger.debug("LOBPCG %d: residuals of the wanted modes max %.1e, median %.1e",
-                     it, res[:n].max(), np.median(res[:n]))
+        logger.debug("LOBPCG %d: residuals of the wanted modes max %.1e, median %.1e; "
+                     "%d of %d columns not converged", it, res[:n].max(), np.median(res[:n]),
+                     np.count_nonzero(res > tol), k)
         best.append(min(res[:n].max(), best[-1]) if best else res[:n].max())
         stalled = it >= _STALL_WINDOW and best[-1] > _STALL_FACTOR * best[-1 - _STALL_WINDOW]
         if (np.all(res[:n] <= tol) or it == maxiter or stalled
                 or not np.all(np.isfinite(res))):
             return w2, X, res, it
         # soft locking: new directions only for the columns not yet converged
-        W = precondition(rows.residual(KX, MX, w2, np.flatnonzero(res > tol)))
+        active = np.flatnonzero(res > tol)
+        W = precondition(R if len(active) == k else R[:, active])
+        del R
         rows.subtract(W, X, rows.inner([MX], [W]))  # M-orthogonal to the Ritz vectors
         KW, MW = K(W), apply_m(W)
-        S = [X, W] if P is None else [X, W, P]
-        KS = [KX, KW] if P is None else [KX, KW, KP]
-        MS = [MX, MW] if P is None else [MX, MW, MP]
-        A, B = rows.inner(S, KS, symmetric=True), rows.inner(S, MS, symmetric=True)
-        del S, KS, MS
+        # and the directions P of those columns only (those of the others left out)
+        S = [X] if P is None else [X, (P, active)]
+        if P is not None:
+            idx = np.r_[np.arange(k), k + active]
+            known = tuple(G[np.ix_(idx, idx)] for G in known)
+        # X^T M W = 0: W was made M-orthogonal to X above
+        HM = rows.inner(S[1:] + [W], [MW])
+        A = _bordered(known[0], rows.inner(S + [W], [KW]))
+        B = _bordered(known[1], np.vstack([np.zeros((k, HM.shape[1])), HM]))
+        del S, HM
         w2, C = _rayleigh_ritz(A, B, k)
         a = W.shape[1]
-        Cx, Cw, Cp = C[:k], C[k:k + a], (C[k + a:] if P is not None else None)
+        known = _carried(A, B, C, a)
+        Cx, Cw, Cp = C[:k], C[-a:], (C[k:k + a] if P is not None else None)
         if P is None:
             P, KP, MP = (np.empty_like(X) for _ in range(3))
         # P <- W Cw + P Cp, X <- X Cx + P: in place, a chunk of rows at a time
-        rows.ritz_update(((X, W, P), (KX, KW, KP), (MX, MW, MP)), Cx, Cw, Cp)
+        rows.ritz_update(((X, W, P), (KX, KW, KP), (MX, MW, MP)), Cx, Cw, Cp, active)
         del W, KW, MW
     raise AssertionError("unreachable")
+
+
+def _take(a, rows):
+    """``a[rows]``, or ``a[0][rows][:, a[1]]`` for a pair (array, columns)."""
+    return a[0][rows][:, a[1]] if isinstance(a, tuple) else a[rows]
+
+
+def _bordered(G: np.ndarray, H: np.ndarray) -> np.ndarray:
+    """The Gram matrix of the basis ``[S, W]`` from that of ``S`` (``G``, q x q) and the
+    products of ``[S, W]`` with the new block (``H``, (q + a) x a)."""
+    q = len(G)
+    Hw = H[q:]
+    return np.block([[G, H[:q]], [H[:q].T, (Hw + Hw.T) / 2]])
+
+
+def _carried(A: np.ndarray, B: np.ndarray, C: np.ndarray, a: int):
+    """The Gram matrices ``(E^T A E, E^T B E)`` of the next basis's known part
+    ``[X, P]``, ``X = S C`` and ``P = S D`` (``D``: ``C`` with the rows of the old ``X``
+    set to zero; ``a`` columns in the new block, 0 at the first step, when there is no
+    ``P`` yet): products of small matrices instead of tall blocks (to round-off; the
+    tolerance is some 1e12 times larger)."""
+    k = C.shape[1]
+    if a == 0:
+        E = C
+    else:
+        D = C.copy()
+        D[:k] = 0
+        E = np.hstack([C, D])
+    out = []
+    for G in (A, B):
+        F = E.T @ G @ E
+        out.append((F + F.T) / 2)
+    return tuple(out)
