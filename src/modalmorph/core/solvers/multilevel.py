@@ -44,10 +44,11 @@ Measured (``benchmarks/scale.py``, 2 cores, ``OPENBLAS_NUM_THREADS=1``): 100k 3D
 the lowest modes are localised where the nodes crowd, hundreds of frequencies lie within a
 few percent, neither the smooth coarse start nor the patch preconditioner sees them, and
 LOBPCG needs some 30 iterations (``benchmarks/multilevel.py``: 100k random points on an
-ellipsoid or a sphere, about 2 minutes on 2 loaded cores, 2.1 GB; the frequencies are
+ellipsoid, 34 iterations, 64.6 CPU-s with one thread, 2.2 GB; the frequencies are
 within 8.6e-3 of the exact solver's at 2500 such nodes, median 3.9e-3). Measured at
-20 000 random nodes on the ellipsoid and not kept: 50 guard vectors instead of 12 (22
-iterations instead of 28) and 64-node patches (23) take longer in all; a shift in the
+20 000 random nodes on the ellipsoid and not kept (docs/issue25/scale.md): 50 guard
+vectors instead of 12 (22 iterations instead of 28) and 64-node patches (23) take longer
+in all; a shift in the
 patches, a coarse-space correction on aggregated patches and a start from the patches'
 own lowest modes saved at most 2 iterations at 3000 nodes.
 """
@@ -88,7 +89,7 @@ COARSE_NODES = 1000
 # Relative residual below which a mode counts as converged (see the module's docstring
 # for what it means for the frequencies, measured against the exact solvers).
 MULTILEVEL_TOL = 5e-2
-# LOBPCG iterations at most (100k random ellipsoid points need 35; method.md §7).
+# LOBPCG iterations at most (100k random ellipsoid points need 34; method.md §7).
 MULTILEVEL_MAXITER = 100
 # Nodes per preconditioner patch: dense (d * 32)^2 inverses, 9 * 32 doubles per
 # 3D node in all (0.23 GB at 100k nodes).
