@@ -44,7 +44,7 @@ Measured (``benchmarks/scale.py``, 2 cores, ``OPENBLAS_NUM_THREADS=1``): 100k 3D
 the lowest modes are localised where the nodes crowd, hundreds of frequencies lie within a
 few percent, neither the smooth coarse start nor the patch preconditioner sees them, and
 LOBPCG needs some 30 iterations (``benchmarks/multilevel.py``: 100k random points on an
-ellipsoid, 34 iterations, 64.6 CPU-s with one thread, 2.2 GB; the frequencies are
+ellipsoid, 34 iterations, 64 s with one thread on a quiet machine, 2.3 GB; the frequencies are
 within 8.6e-3 of the exact solver's at 2500 such nodes, median 3.9e-3). Measured at
 20 000 random nodes on the ellipsoid and not kept (docs/issue25/scale.md): 50 guard
 vectors instead of 12 (22 iterations instead of 28) and 64-node patches (23) take longer
