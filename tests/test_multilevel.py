@@ -54,6 +54,22 @@ def test_residuals_below_tolerance(models):
     assert np.all(res <= 5e-2 * (1 + 1e-6))  # the solver's own check, recomputed
 
 
+def test_ritz_vectors_diagonalise_both_matrices(models):
+    """The Gram blocks of the Ritz vectors and the directions are carried from one
+    Rayleigh-Ritz step to the next as small products instead of formed from the tall
+    blocks: the returned modes must still be a Rayleigh-Ritz basis of the true K_g and
+    M_g. Measured 5e-15 (M) and 3e-15 (K, relative to the largest w^2), against 4e-12
+    and 6e-12 with every block formed from the tall ones: round-off either way."""
+    _, model, _, mm = models
+    Gamma = model.gram_sparse[1]
+    rho = model.material.rho
+    psi = mm.gaussian
+    Mpsi = rho * np.concatenate([Gamma @ p for p in psi.reshape(3, model.m, -1)])
+    assert_allclose(psi.T @ Mpsi, np.eye(N_MODES), atol=1e-10)  # mass-normalised
+    Kr = psi.T @ (model.stiffness_gaussian_sparse @ psi)
+    assert_allclose(Kr, np.diag(mm.eigenvalues), atol=1e-10 * mm.eigenvalues.max())
+
+
 def test_not_converged_is_an_error(models):
     _, model, _, _ = models
     with pytest.raises(ValueError, match="did not converge .* relative residual"):

@@ -7,7 +7,8 @@ Each solver is a module with ``solve(model, n) -> Modes`` for an
 - :mod:`.sparse`: the truncated model (interactions beyond ``cutoff_radius`` dropped),
   the lowest ``n`` modes by shift-invert Lanczos on a sparse factor.
 - :mod:`.multilevel`: the truncated model, the lowest ``n`` modes by a coarse start and
-  LOBPCG, without a factorisation (3D point sets, where the sparse factor does not fit).
+  LOBPCG, without a factorisation (3D point sets, where the sparse factor does not fit);
+  :mod:`.lobpcg` is the block LOBPCG it runs.
 
 :func:`choose` resolves a solver name (``"auto"`` by the size of the model) into a
 :class:`Solver`, which says whether the model it solves is truncated.

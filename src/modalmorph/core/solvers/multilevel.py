@@ -16,7 +16,10 @@ only multiplies by the full model's sparse matrices:
    solves with ``K_g`` restricted to small patches of neighbouring nodes (block Jacobi),
    until every wanted mode's relative residual
    ``||K_g psi - w^2 M_g psi|| / (w^2 ||M_g psi||)`` is below ``tol``, for as long as
-   the largest of them keeps falling (at most ``maxiter`` iterations).
+   the largest of them keeps falling (at most ``maxiter`` iterations): the block
+   LOBPCG of :mod:`modalmorph.core.solvers.lobpcg` (soft locking; the Gram blocks of the
+   Ritz vectors and the previous directions carried from one Rayleigh-Ritz step to the
+   next as small products).
 
 Work and memory are linear in the number of pairs within the cutoff (``model.pairs``).
 The solver assembles its own matrices from them, on its own node order (the leaves of a
@@ -41,10 +44,11 @@ Measured (``benchmarks/scale.py``, 2 cores, ``OPENBLAS_NUM_THREADS=1``): 100k 3D
 the lowest modes are localised where the nodes crowd, hundreds of frequencies lie within a
 few percent, neither the smooth coarse start nor the patch preconditioner sees them, and
 LOBPCG needs some 30 iterations (``benchmarks/multilevel.py``: 100k random points on an
-ellipsoid or a sphere, about 2 minutes on 2 loaded cores, 2.1 GB; the frequencies are
+ellipsoid, 34 iterations, 64 s with one thread on a quiet machine, 2.3 GB; the frequencies are
 within 8.6e-3 of the exact solver's at 2500 such nodes, median 3.9e-3). Measured at
-20 000 random nodes on the ellipsoid and not kept: 50 guard vectors instead of 12 (22
-iterations instead of 28) and 64-node patches (23) take longer in all; a shift in the
+20 000 random nodes on the ellipsoid and not kept (docs/issue25/scale.md): 50 guard
+vectors instead of 12 (22 iterations instead of 28) and 64-node patches (23) take longer
+in all; a shift in the
 patches, a coarse-space correction on aggregated patches and a start from the patches'
 own lowest modes saved at most 2 iterations at 3000 nodes.
 """
@@ -69,6 +73,7 @@ from ..element import (
     stiffness_entries,
 )
 from ..modes import Modes
+from .lobpcg import Rows, lobpcg
 
 __all__ = ["solve", "Operators", "COARSE_NODES", "MULTILEVEL_CUTOFF", "MULTILEVEL_TOL",
            "MULTILEVEL_MAXITER", "THREADS"]
@@ -84,18 +89,17 @@ COARSE_NODES = 1000
 # Relative residual below which a mode counts as converged (see the module's docstring
 # for what it means for the frequencies, measured against the exact solvers).
 MULTILEVEL_TOL = 5e-2
-# LOBPCG iterations at most (100k random ellipsoid points need 35; method.md §7).
+# LOBPCG iterations at most (100k random ellipsoid points need 34; method.md §7).
 MULTILEVEL_MAXITER = 100
-# Stalled: the residual fell by less than _STALL_FACTOR over this many iterations (method.md §7).
-_STALL_WINDOW = 10
-_STALL_FACTOR = 0.9
-# Nodes per preconditioner patch: dense (d * 32)^2 Cholesky factors, 9 * 32 doubles per
+# Nodes per preconditioner patch: dense (d * 32)^2 inverses, 9 * 32 doubles per
 # 3D node in all (0.23 GB at 100k nodes).
 _PATCH_NODES = 32
 # Patches per batched product in the preconditioner (a few MB of temporaries each).
 _PATCH_BATCH = 256
-# Rows per chunk of the dense block operations in LOBPCG (a few MB of temporaries each).
-_ROWS = 4096
+# Rows per block of the sparse products: products of 100 000 nodes times 62 columns in
+# blocks of 6250 rows take 536 ms (K_g) against 582 in one block, one thread (the
+# products' results stay small and are reused instead of mapped afresh).
+_SPARSE_ROWS = 8192
 # Points per chunk of the coarse modes' fields at the fine nodes.
 _FIELD_CHUNK = 16384
 # Threads of the sparse and dense block products (2 cores; results equal to round-off).
@@ -160,8 +164,8 @@ def solve(model, n: int, *, coarse_nodes: int = COARSE_NODES, tol: float = MULTI
         dense = threads if _blas_single_threaded() else 1
         precondition = _patch_preconditioner(model, order, pool, dense)
         clock("preconditioner")
-        w2, psi, res, its = _lobpcg(ops, precondition, start, n, tol, maxiter,
-                                    _Rows(pool, dense, d * m), clock)
+        w2, psi, res, its = lobpcg(ops, precondition, start, n, tol, maxiter,
+                                    Rows(pool, dense, d * m), clock)
         del precondition
         _check_converged(model, res[:n], tol, its, maxiter)
         psi = psi[:, :n]
@@ -256,9 +260,9 @@ class Operators:
     ``K_g`` is stored as its ``d (d + 1) / 2`` distinct scalar m x m components
     ``K^ab`` (:func:`modalmorph.core.element.stiffness_components`), ``Gamma`` as one more, all
     over one sparse structure (the pairs within the cutoff and the diagonal). The rows are
-    split into ``threads`` blocks of about equal nonzeros, each with its own index arrays;
-    a product
-    runs one block per thread (scipy's sparse products release the GIL), each block
+    split into blocks of about equal nonzeros (a multiple of ``threads`` of them, at most
+    ``_SPARSE_ROWS`` rows each), each with its own index arrays; a product runs the
+    blocks on ``threads`` threads (scipy's sparse products release the GIL), each block
     computing ``(K X)_a = sum_b K^ab X_b`` for its rows.
     """
 
@@ -279,7 +283,9 @@ class Operators:
         indptr, indices = pattern.indptr, pattern.indices
         del pattern
         nnz = int(indptr[-1])
-        cuts = np.searchsorted(indptr, np.arange(threads + 1) * (nnz / threads))
+        # blocks of at most _SPARSE_ROWS rows, a multiple of threads of them
+        parts = threads * -(-m // (threads * _SPARSE_ROWS))
+        cuts = np.searchsorted(indptr, np.arange(parts + 1) * (nnz / parts))
         cuts[0], cuts[-1] = 0, m
         cuts = np.unique(cuts)
         self.blocks = []
@@ -311,11 +317,11 @@ class Operators:
         for _ in self.pool.map(work, range(len(self.blocks))):
             pass
 
-    def stiffness(self, X: np.ndarray) -> np.ndarray:
-        """``K_g X``."""
+    def stiffness(self, X: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """``K_g X`` (into ``out``, of X's shape, when given)."""
         d, m = self.d, self.m
         Xs = X.reshape(d, m, -1)
-        Y = np.empty_like(Xs)
+        Y = np.empty_like(Xs) if out is None else out.reshape(Xs.shape)
 
         def work(t):
             r0, r1 = self.blocks[t][:2]
@@ -330,11 +336,11 @@ class Operators:
         self._run(work)
         return Y.reshape(X.shape)
 
-    def mass(self, X: np.ndarray) -> np.ndarray:
-        """``(I kron Gamma) X`` (without rho)."""
+    def mass(self, X: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """``(I kron Gamma) X`` (without rho; into ``out`` when given)."""
         d, m = self.d, self.m
         Xs = X.reshape(d, m, -1)
-        Y = np.empty_like(Xs)
+        Y = np.empty_like(Xs) if out is None else out.reshape(Xs.shape)
 
         def work(t):
             r0, r1 = self.blocks[t][:2]
@@ -384,8 +390,8 @@ def _patch_preconditioner(model, order: np.ndarray, pool: ThreadPoolExecutor,
                           threads: int):
     """Block Jacobi: exact solves with ``K_g`` restricted to patches of ``_PATCH_NODES``
     consecutive nodes of the solver's order (leaves of a k-d tree, so neighbours), on
-    component-major blocks. Each patch's inverse Cholesky factor ``L^-1`` is stored and
-    the solves are batched products ``L^-T (L^-1 R)``, batches of patches over the
+    component-major blocks. Each patch's inverse ``A^-1 = L^-T L^-1`` (from its Cholesky
+    factor) is stored and the solves are batched products ``A^-1 R``, batches of patches over the
     threads."""
     d, m = model.dim, model.m
     lam, mu = model.lame
@@ -400,188 +406,33 @@ def _patch_preconditioner(model, order: np.ndarray, pool: ThreadPoolExecutor,
         A = blocks.transpose(2, 0, 3, 1).reshape(d * len(y), d * len(y))
         A[np.diag_indices_from(A)] *= 1 + 1e-8  # K_g is only semi-definite numerically
         L = linalg.cholesky(A, lower=True, check_finite=False)
-        return linalg.solve_triangular(L, np.eye(len(L)), lower=True, check_finite=False)
+        Li = linalg.solve_triangular(L, np.eye(len(L)), lower=True, check_finite=False)
+        return Li.T @ Li  # A^-1: one product per solve instead of two triangular ones
 
-    Linv = np.stack([inverse_factor(s) for s in starts[:full]])
+    Ainv = np.stack([inverse_factor(s) for s in starts[:full]])
     last = inverse_factor(full * P) if full * P < m else None
     batches = [(b, min(b + _PATCH_BATCH, full)) for b in range(0, full, _PATCH_BATCH)]
 
-    def apply(R: np.ndarray) -> np.ndarray:
-        k = R.shape[1]
-        Rs = R.reshape(d, m, k)
-        out = np.empty_like(Rs)
+    def apply(R: np.ndarray, cols, out: np.ndarray) -> np.ndarray:
+        """The solves for the columns ``cols`` of ``R``, into ``out``."""
+        k = out.shape[1]
+        Rs = R.reshape(d, m, -1)
+        out = out.reshape(d, m, k)
 
         def work(t):
             for b0, b1 in batches[t::threads]:
                 # (d, patches, P, k) -> (patches, d*P, k): each patch component-major
-                Rp = Rs[:, b0 * P:b1 * P].reshape(d, b1 - b0, P, k).transpose(1, 0, 2, 3)
-                Li = Linv[b0:b1]
-                Y = np.matmul(Li.transpose(0, 2, 1),
-                              np.matmul(Li, Rp.reshape(b1 - b0, d * P, k)))
+                Rp = Rs[:, b0 * P:b1 * P][..., cols].reshape(d, b1 - b0, P, k).transpose(
+                    1, 0, 2, 3)
+                Y = np.matmul(Ainv[b0:b1], Rp.reshape(b1 - b0, d * P, k))
                 out[:, b0 * P:b1 * P] = Y.reshape(b1 - b0, d, P, k).transpose(
                     1, 0, 2, 3).reshape(d, (b1 - b0) * P, k)
 
         for _ in pool.map(work, range(threads)):
             pass
         if last is not None:
-            r = Rs[:, full * P:].reshape(-1, k)
-            out[:, full * P:] = (last.T @ (last @ r)).reshape(d, m - full * P, k)
-        return out.reshape(R.shape)
+            r = Rs[:, full * P:][..., cols].reshape(-1, k)
+            out[:, full * P:] = (last @ r).reshape(d, m - full * P, k)
+        return out.reshape(-1, k)
 
     return apply
-
-
-def _rayleigh_ritz(A: np.ndarray, B: np.ndarray, k: int):
-    """Lowest ``k`` eigenpairs of the pencil ``(A, B)``, B semi-definite: directions B
-    cannot tell apart from 0 (relative 1e-12 after scaling to unit diagonal) are dropped."""
-    scale = 1 / np.sqrt(np.diag(B))
-    A, B = A * scale * scale[:, None], B * scale * scale[:, None]
-    bw, bv = linalg.eigh((B + B.T) / 2, check_finite=False)
-    keep = bw > 1e-12 * bw[-1]
-    T = bv[:, keep] / np.sqrt(bw[keep])
-    At = T.T @ A @ T
-    w, C = linalg.eigh((At + At.T) / 2, subset_by_index=(0, k - 1), check_finite=False)
-    return w, (T @ C) * scale[:, None]
-
-
-class _Rows:
-    """Dense operations on tall blocks (N, c), a chunk of ``_ROWS`` rows at a time and the
-    chunks spread over the threads: no temporary of a block's full size."""
-
-    def __init__(self, pool: ThreadPoolExecutor, threads: int, N: int):
-        self.pool, self.threads = pool, threads
-        self.chunks = [slice(s, min(s + _ROWS, N)) for s in range(0, N, _ROWS)]
-
-    def map(self, fn):
-        """``[fn(rows) for rows in the chunks]`` summed per thread: one result per
-        thread."""
-        def work(t):
-            out = None
-            for rows in self.chunks[t::self.threads]:
-                v = fn(rows)
-                out = v if out is None else out + v
-            return out
-
-        return [v for v in self.pool.map(work, range(self.threads)) if v is not None]
-
-    def inner(self, S: list, T: list, symmetric: bool = False) -> np.ndarray:
-        """The block matrix ``[[a.T @ b for b in T] for a in S]``; with ``symmetric``
-        (``S[i].T @ T[j] = (S[j].T @ T[i]).T``) only the blocks ``j >= i`` are computed."""
-        def part(rows):
-            blocks = [[None] * len(T) for _ in S]
-            for i, a in enumerate(S):
-                for j, b in enumerate(T):
-                    if not symmetric or j >= i:
-                        blocks[i][j] = a[rows].T @ b[rows]
-            for i in range(len(S)):
-                for j in range(i if symmetric else 0):
-                    blocks[i][j] = blocks[j][i].T
-            return np.block(blocks)
-
-        return sum(self.map(part))
-
-    def norms(self, X: np.ndarray, w2: np.ndarray | None = None,
-              MX: np.ndarray | None = None) -> np.ndarray:
-        """Euclidean norms of the columns of ``X``, or of ``X - MX diag(w2)``."""
-        def part(rows):
-            Y = X[rows] if MX is None else X[rows] - MX[rows] * w2
-            return np.einsum("ij,ij->j", Y, Y)
-
-        return np.sqrt(sum(self.map(part)))
-
-    def each(self, fn) -> None:
-        """``fn(rows)`` for every chunk."""
-        def part(rows):
-            fn(rows)
-            return None
-
-        self.map(part)
-
-    def times(self, Y: np.ndarray, C: np.ndarray) -> None:
-        """``Y <- Y C`` in place (C square)."""
-        def part(rows):
-            Y[rows] = Y[rows] @ C
-
-        self.each(part)
-
-    def residual(self, KX: np.ndarray, MX: np.ndarray, w2: np.ndarray,
-                 cols: np.ndarray) -> np.ndarray:
-        """``(KX - MX diag(w2))[:, cols]``."""
-        R = np.empty((KX.shape[0], len(cols)))
-
-        def part(rows):
-            R[rows] = KX[rows][:, cols] - MX[rows][:, cols] * w2[cols]
-
-        self.each(part)
-        return R
-
-    def subtract(self, W: np.ndarray, X: np.ndarray, H: np.ndarray) -> None:
-        """``W <- W - X H`` in place."""
-        def part(rows):
-            W[rows] -= X[rows] @ H
-
-        self.each(part)
-
-    def ritz_update(self, blocks, Cx: np.ndarray, Cw: np.ndarray,
-                    Cp: np.ndarray | None) -> None:
-        """For each ``(Y, Z, Q)`` of ``blocks``, in place: ``Q <- Z Cw + Q Cp`` (``Q Cp``
-        left out when ``Cp`` is None) and then ``Y <- Y Cx + Q``."""
-        def part(rows):
-            for Y, Z, Q in blocks:
-                q = Z[rows] @ Cw
-                if Cp is not None:
-                    q += Q[rows] @ Cp
-                Q[rows] = q
-                q += Y[rows] @ Cx
-                Y[rows] = q
-
-        self.each(part)
-
-
-def _lobpcg(ops, precondition, V, n, tol, maxiter, rows, clock):
-    """LOBPCG for the lowest ``n`` eigenpairs of ``(K, M)``, block ``V[0].shape[1]``,
-    started from the span of ``V[0]`` (a list, emptied here so that the block is freed
-    once used). ``ops.stiffness`` and ``ops.mass`` apply K and M (an :class:`Operators`),
-    ``rows`` is a :class:`_Rows` and ``clock`` a :class:`_Clock`. Products
-    with K and M are done once per new block and carried through the Ritz updates, in
-    place. Returns ``(w2, X, residuals, iterations)``."""
-    K, apply_m = ops.stiffness, ops.mass
-    V = V.pop()
-    k = V.shape[1]
-    KV, MV = K(V), apply_m(V)
-    w2, C = _rayleigh_ritz(rows.inner([V], [KV]), rows.inner([V], [MV]), k)
-    for Y in (V, KV, MV):
-        rows.times(Y, C)
-    X, KX, MX = V, KV, MV
-    del V, KV, MV
-    P = KP = MP = None
-    best = []  # the lowest largest wanted residual so far, per iteration
-    for it in range(maxiter + 1):
-        # relative residuals ||K x - w2 M x|| / (w2 ||M x||), without the block K X - M X w2
-        res = rows.norms(KX, w2, MX) / (np.abs(w2) * rows.norms(MX))
-        clock(f"LOBPCG {it}")
-        logger.debug("LOBPCG %d: residuals of the wanted modes max %.1e, median %.1e",
-                     it, res[:n].max(), np.median(res[:n]))
-        best.append(min(res[:n].max(), best[-1]) if best else res[:n].max())
-        stalled = it >= _STALL_WINDOW and best[-1] > _STALL_FACTOR * best[-1 - _STALL_WINDOW]
-        if (np.all(res[:n] <= tol) or it == maxiter or stalled
-                or not np.all(np.isfinite(res))):
-            return w2, X, res, it
-        # soft locking: new directions only for the columns not yet converged
-        W = precondition(rows.residual(KX, MX, w2, np.flatnonzero(res > tol)))
-        rows.subtract(W, X, rows.inner([MX], [W]))  # M-orthogonal to the Ritz vectors
-        KW, MW = K(W), apply_m(W)
-        S = [X, W] if P is None else [X, W, P]
-        KS = [KX, KW] if P is None else [KX, KW, KP]
-        MS = [MX, MW] if P is None else [MX, MW, MP]
-        A, B = rows.inner(S, KS, symmetric=True), rows.inner(S, MS, symmetric=True)
-        del S, KS, MS
-        w2, C = _rayleigh_ritz(A, B, k)
-        a = W.shape[1]
-        Cx, Cw, Cp = C[:k], C[k:k + a], (C[k + a:] if P is not None else None)
-        if P is None:
-            P, KP, MP = (np.empty_like(X) for _ in range(3))
-        # P <- W Cw + P Cp, X <- X Cx + P: in place, a chunk of rows at a time
-        rows.ritz_update(((X, W, P), (KX, KW, KP), (MX, MW, MP)), Cx, Cw, Cp)
-        del W, KW, MW
-    raise AssertionError("unreachable")
