@@ -162,6 +162,18 @@ def test_nifti_declaring_a_huge_volume_is_refused_from_its_header(server, name):
     body = gzip.compress(head) if name.endswith(".gz") else head
     status, answer = _request(server, "POST", f"/api/upload?name={name}", body)
     assert status == 413 and "max_array_bytes" in answer["error"], answer
+    lying = nib.Nifti1Header()  # float64 voxels whose header claims 8 bits each
+    lying.set_data_shape((400, 400, 100))
+    lying.set_data_dtype(np.float64)
+    block = bytearray(lying.binaryblock + b"\0" * 4)
+    block[72:74] = struct.pack("<h", 8)  # bitpix; nibabel sizes the data by the datatype
+    body = gzip.compress(bytes(block)) if name.endswith(".gz") else bytes(block)
+    status, answer = _request(server, "POST", f"/api/upload?name={name}", body)
+    assert status == 413 and "8 bytes a voxel" in answer["error"], answer
+    if name.endswith(".gz"):  # a broken deflate stream: a 4xx naming the file, not a 500
+        broken = b"\x1f\x8b\x08\x00\x00\x00\x00\x00\x00\x03" + b"\xff" * 600
+        status, answer = _request(server, "POST", f"/api/upload?name={name}", broken)
+        assert 400 <= status < 500 and name in answer["error"], answer
     i, j = np.indices((40, 40))  # a small mask of the same kind is taken
     small = nib.Nifti1Image(((i - 20) ** 2 + (j - 18) ** 2 < 150).astype(np.uint8), np.eye(4))
     body = small.to_bytes()

@@ -302,6 +302,10 @@ def test_svg_object_choice(tmp_path):
     assert len(every.sizes) == 3 and every.closed
     with pytest.raises(ValueError, match="object=4, but the file draws 3 outline"):
         read_shape(path, object=4)
+    off_grid = _svg(tmp_path, '<circle cx="30" cy="30" r="10"/><rect x="50" y="50" '
+                    'width="30" height="20"/>', "off.svg")  # its arc ends 4e-15 from its start
+    both = read_shape(off_grid, nodes=90, object="all")
+    assert len(both.sizes) == 2 and both.closed
     mixed = _svg(tmp_path, '<rect width="9" height="9"/><polyline points="20,0 30,9 40,0"/>',
                  "mixed.svg")
     with pytest.raises(ValueError, match="mixes closed and open contours"):

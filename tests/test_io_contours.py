@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from matplotlib.path import Path as MplPath
+from numpy.testing import assert_allclose
 
 from modalmorph.core.quality import area
 from modalmorph.errors import InputFileError
@@ -160,6 +161,8 @@ def test_nifti_volume_is_read_as_its_object_surface_in_mm(tmp_path):
         read_shape(path)
     with pytest.raises(InputFileError, match="no object in the volume"):
         read_shape(path, threshold=5)
+    trailing = _save_nifti(tmp_path / "organ4d.nii", labels[..., None], tuple(spacing))
+    assert_allclose(read_shape(trailing, label=2).points, shape.points)  # (X, Y, Z, 1)
 
 
 def assert_radii(points, centre, radius, tol):

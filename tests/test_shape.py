@@ -221,3 +221,9 @@ def test_3d_points_along_a_curve_in_order_are_ordered_by_default():
     sphere = u / np.linalg.norm(u, axis=1, keepdims=True)
     assert not traces_curve(sphere) and not Shape(sphere).ordered
     assert not Shape(curves["planar"], ordered=False).ordered  # said: kept
+    ring = np.linspace(0, 2 * np.pi, 90, endpoint=False)
+    stack = np.vstack([np.c_[(20 - k) * np.cos(ring), (20 - k) * np.sin(ring),
+                             np.full(90, 10.0 * k)] for k in range(6)])  # slice by slice
+    u, v = np.meshgrid(np.arange(200.0), 10.0 * np.arange(20.0))  # scan rows 10 apart
+    for name, pts in {"stack": stack, "rows": np.c_[u.ravel(), v.ravel(), 0 * u.ravel()]}.items():
+        assert not traces_curve(pts) and not Shape(pts).ordered, name

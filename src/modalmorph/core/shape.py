@@ -13,9 +13,9 @@ from scipy.spatial import cKDTree
 
 from ..errors import ShapeError
 
-__all__ = ["CURVE_DIMENSION", "FPS_POOL", "FPS_TREE", "GRID_ROUNDS", "HUGE", "ImageFrame",
-           "PASSED_KEPT", "Shape", "as_shape", "check_once", "check_pairs", "coarsen",
-           "curve_dimension", "even_subset", "forget_checks", "resample", "share",
+__all__ = ["CURVE_DIMENSION", "CURVE_JUMP", "CURVE_STEP", "FPS_POOL", "FPS_TREE", "GRID_ROUNDS",
+           "HUGE", "ImageFrame", "PASSED_KEPT", "Shape", "as_shape", "check_once", "check_pairs",
+           "coarsen", "curve_dimension", "even_subset", "forget_checks", "resample", "share",
            "spread_indices", "traces_curve"]
 
 # Two nodes closer than this fraction of the object's RMS radius are "the same node".
@@ -36,11 +36,13 @@ HUGE = 200_000  # unordered sets above this: farthest points among an even_subse
 # gives 2.05: at that sampling its neighbours span the next turns, as a surface's would.
 CURVE_DIMENSION = 1.5
 CURVE_SAMPLE = 4096
-# Points in the order given trace their curve where this fraction of the steps to the next
-# point are at most CURVE_STEP times the distance to its second nearest point: in order,
-# 0.85-1.0 (an ellipse, a helix, a noisy helix, an ellipse at random spacing; 100-100 000
-# points), shuffled 0.00-0.08.
-CURVE_IN_ORDER, CURVE_STEP = 0.5, 1.5
+# Points in the order given trace one curve where their median step to the next point is
+# at most CURVE_STEP times the median distance to the second nearest (in order 1.0; the
+# points shuffled, steps across the whole object), and no step is longer than CURVE_JUMP
+# times the median step: an ellipse, a helix, a noisy helix (100-10 000 points) 1.0-2.1;
+# a stack of slice contours written one after another 6.5-8.1, raster rows 199. A curve
+# sampled at random spacing (4.8-8.1) stays a point set (its stop test still a curve's).
+CURVE_STEP, CURVE_JUMP = 1.5, 4.0
 FPS_POOL = 20  # its candidates per point chosen (§7)
 # Farthest points through a k-d tree above this many points (ellipsoid points, 3000 of
 # 100 000: 6.6 -> 0.22 s; 1000 of 20 000: 0.57 -> 0.09 s; 400 of 2000: 32 -> 10 ms; 400 of
@@ -537,20 +539,32 @@ def check_pairs(pairs, m: int, n: int) -> np.ndarray:
 def curve_dimension(points: np.ndarray) -> float:
     """The dimension a point set shows (1 along a curve, 2 on a surface): the median of
     ``log 4 / log(r12 / r3)`` over up to ``CURVE_SAMPLE`` points taken in order."""
-    sample = points[::-(-len(points) // CURVE_SAMPLE)]
-    if len(sample) < 13:
-        return float(points.shape[1] - 1)
-    r = cKDTree(sample).query(sample, k=13)[0]
-    return float(np.median(np.log(4.0) / np.log(r[:, 12] / np.maximum(r[:, 3], 1e-300))))
+    _, r = _sample_neighbours(points)
+    return float(points.shape[1] - 1) if r is None else _dimension(r)
 
 
 def traces_curve(points: np.ndarray) -> bool:
-    """Whether 3D points lie along a curve (:func:`curve_dimension` under
-    ``CURVE_DIMENSION``) and follow it in the order given (``CURVE_IN_ORDER`` of the steps
-    at most ``CURVE_STEP`` times the second-nearest distance)."""
-    sample = points[::-(-len(points) // CURVE_SAMPLE)]
-    if len(sample) < 13 or curve_dimension(points) >= CURVE_DIMENSION:
+    """Whether 3D points lie along one curve (:func:`curve_dimension` under
+    ``CURVE_DIMENSION``) and follow it in the order given: the median step to the next
+    point within ``CURVE_STEP`` second-nearest distances, none over ``CURVE_JUMP`` times
+    the median step (on up to ``CURVE_SAMPLE`` points taken in order)."""
+    sample, r = _sample_neighbours(points)
+    if r is None:
         return False
-    second = cKDTree(sample).query(sample[:-1], k=3)[0][:, 2]
     steps = np.linalg.norm(np.diff(sample, axis=0), axis=1)
-    return bool(np.mean(steps <= CURVE_STEP * second) >= CURVE_IN_ORDER)
+    median = np.median(steps)
+    return bool(median <= CURVE_STEP * np.median(r[:, 2]) and steps.max() <= CURVE_JUMP
+                * median and _dimension(r) < CURVE_DIMENSION)
+
+
+def _sample_neighbours(points: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """Up to ``CURVE_SAMPLE`` of the points, in order, and the distances to their 12
+    nearest (none under 13 points)."""
+    sample = points[::-(-len(points) // CURVE_SAMPLE)]
+    if len(sample) < 13:
+        return sample, None
+    return sample, cKDTree(sample).query(sample, k=13)[0]
+
+
+def _dimension(r: np.ndarray) -> float:
+    return float(np.median(np.log(4.0) / np.log(r[:, 12] / np.maximum(r[:, 3], 1e-300))))

@@ -18,6 +18,7 @@ import gzip
 import re
 import struct
 import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -185,6 +186,12 @@ def check_image(path, limits: Limits = DEFAULT_LIMITS) -> tuple[int, int] | None
     return width, height
 
 
+# Bytes a voxel of each NIfTI datatype code (what nibabel reads, whatever bitpix says); an
+# unknown code counts as the largest.
+_NIFTI_BYTES = {2: 1, 4: 2, 8: 4, 16: 4, 32: 8, 64: 8, 128: 3, 256: 1, 512: 2, 768: 4,
+                1024: 8, 1280: 8, 1536: 16, 1792: 16, 2048: 32, 2304: 4}
+
+
 def check_nifti(path, limits: Limits = DEFAULT_LIMITS) -> tuple[int, ...] | None:
     """The array shape a NIfTI-1 or -2 file declares, from its header (a few hundred bytes
     inflated), or None when the header is not one; :class:`LimitError` when the data
@@ -195,21 +202,22 @@ def check_nifti(path, limits: Limits = DEFAULT_LIMITS) -> tuple[int, ...] | None
     try:
         with opener(path, "rb") as stream:
             head = stream.read(544)
-    except (OSError, EOFError):
-        return None
+    except (OSError, EOFError, zlib.error):
+        return None  # not a NIfTI file: the reader says what is wrong
     for order in "<>":
         if len(head) >= 348 and struct.unpack(order + "i", head[:4])[0] == 348:  # NIfTI-1
-            dim, bitpix = struct.unpack(order + "8h", head[40:56]), struct.unpack(
-                order + "h", head[72:74])[0]
+            dim, (code, bitpix) = struct.unpack(order + "8h", head[40:56]), struct.unpack(
+                order + "2h", head[70:74])
         elif len(head) >= 540 and struct.unpack(order + "i", head[:4])[0] == 540:
-            bitpix, dim = struct.unpack(order + "h", head[14:16])[0], struct.unpack(
+            (code, bitpix), dim = struct.unpack(order + "2h", head[12:16]), struct.unpack(
                 order + "8q", head[16:80])
         else:
             continue
         shape = tuple(int(n) for n in dim[1:1 + min(max(dim[0], 0), 7)])
-        nbytes = int(np.prod([max(n, 0) for n in shape], dtype=object)) * max(bitpix, 8) // 8
+        item = max(_NIFTI_BYTES.get(code, max(_NIFTI_BYTES.values())), bitpix // 8)
+        nbytes = int(np.prod([max(n, 0) for n in shape], dtype=object)) * item
         if nbytes > limits.max_array_bytes:
-            raise LimitError(f"{path.name}: the NIfTI data {shape} of {bitpix} bits would "
+            raise LimitError(f"{path.name}: the NIfTI data {shape} of {item} bytes a voxel would "
                              f"take {nbytes} bytes, the limit (max_array_bytes) is "
                              f"{limits.max_array_bytes} bytes", "max_array_bytes")
         return shape

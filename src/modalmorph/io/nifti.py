@@ -55,8 +55,8 @@ _HEARING = threading.Lock()
 def read_nifti(path: Path, name: str, options: ReadOptions) -> RawShape:
     """The contours of the chosen object of a one-frame NIfTI file, in its spatial unit."""
     image = _load(path, name)
-    if len(image.shape) == 3 and image.shape[2] > 1:
-        return _volume_surface(image, name, options)
+    if len(image.shape) in (3, 4) and image.shape[2] > 1 and image.shape[3:] in ((), (1,)):
+        return _volume_surface(image, name, options)  # (X, Y, Z) or (X, Y, Z, 1)
     slices, spacing, unit = nifti_slices(path, name)
     if len(slices) > 1:
         raise InputFileError(f"{name}: a 2D+t volume of {len(slices)} frames: read it as a "
@@ -76,7 +76,7 @@ def _volume_surface(image, name: str, options: ReadOptions) -> RawShape:
         raise InputFileError(f"{name}: the header's voxel spacing must be three positive "
                              f"numbers, got {zooms}")
     try:
-        data = np.asanyarray(image.dataobj)
+        data = np.asanyarray(image.dataobj).reshape(image.shape[:3])
     except (OSError, ValueError, EOFError, MemoryError) as exc:
         raise InputFileError(f"{name}: cannot read the NIfTI data: {_line(exc)}") from None
     if options.label is not None and options.threshold is not None:
@@ -183,7 +183,7 @@ def nifti_slices(path: Path, name: str
     shape = image.shape
     if len(shape) < 2 or len(shape) > 4 or (len(shape) == 4 and shape[2] != 1):
         raise InputFileError(f"{name}: expected a 2D slice (X, Y), (X, Y, T) or (X, Y, 1, T), "
-                             f"got an array of shape {shape}")
+                             f"or a 3D volume (X, Y, Z), got an array of shape {shape}")
     spacing = _spacing(image, name)
     unit = _unit_name(image)
     try:

@@ -197,9 +197,10 @@ def _sampled(se, segments) -> tuple[np.ndarray, bool]:
     pts = np.vstack([np.array(segments[0].end)[None]]
                     + [seg.npoint(t) for seg in segments[1:]])
     closed = isinstance(segments[-1], se.Close)
-    keep = np.r_[True, np.any(np.diff(pts, axis=0) != 0, axis=1)]
+    tol = 1e-12 * np.abs(pts).max()  # a circle's closing arc ends 4e-15 from its start
+    keep = np.r_[True, np.any(np.abs(np.diff(pts, axis=0)) > tol, axis=1)]
     pts = pts[keep]  # zero-length segments add nothing to the outline
-    if len(pts) > 1 and np.allclose(pts[0], pts[-1], rtol=0, atol=1e-12 * np.abs(pts).max()):
+    if len(pts) > 1 and np.allclose(pts[0], pts[-1], rtol=0, atol=tol):
         pts, closed = pts[:-1], True  # ends where it starts
     return pts, closed
 

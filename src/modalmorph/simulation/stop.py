@@ -4,10 +4,10 @@ One class per kind of object, chosen once by :func:`choose_stop_test`, all with 
 interface of :class:`StopTest`: :class:`CurveStop` for contours (the two-way distance
 between the curves; :class:`ContourStop` per pair of partner contours),
 :class:`SurfaceStop` for 3D point sets and surfaces (the two-way distance to the other's
-surface less the target's roughness), :class:`PairStop` for the others (a 3D point set
-along a curve given unordered among them: the quadrics of its neighbours lie flat in any
-plane through the curve, and would call a curve beside it reached) (the mean
-distance of the pulled pairs). Distances are in the model's normalised units.
+surface less the target's roughness), :class:`PairStop` for the others (the mean distance
+of the pulled pairs), a 3D point set along a curve given unordered among them: the
+quadrics of a curve's neighbours lie flat in any plane through it, and would call a curve
+beside it reached. Distances are in the model's normalised units.
 """
 
 from __future__ import annotations

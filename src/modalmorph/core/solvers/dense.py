@@ -122,6 +122,8 @@ def _evd_lowest(A: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     Z = np.asfortranarray(Z[:, :n])  # Q = diag(1, Q1), Q1 the reflectors below the first row
     Z[1:], _, info = lapack.dormqr("L", "N", c[1:, :N - 1], tau[:N - 1], Z[1:],
                                    _dormqr_lwork(N, n), overwrite_c=1)
+    if info != 0:
+        raise linalg.LinAlgError(f"the dense eigensolver failed (LAPACK dormqr info {info})")
     return w[:n], Z
 
 
