@@ -36,7 +36,7 @@ from ..options import ReadOptions
 from .base import DEFAULT_NODES, RawShape, make_shape
 
 __all__ = ["INSIDE_FRACTION", "MAX_PARTIAL_ALPHA", "MIN_HOLE_AREA", "MIN_OBJECT_PIXELS",
-           "grey_levels", "image_contours", "label_pixels", "mask_contours", "mask_shape",
+           "grey_levels", "image_contours", "mask_contours", "mask_shape", "object_mask",
            "read_image"]
 
 # An object inside the image is taken over a larger one touching the border when
@@ -127,7 +127,7 @@ def mask_shape(mask, name: str = "mask", *, label=None, nodes: int | None = None
     if array.ndim != 2 or min(array.shape) < 1 or array.dtype.kind not in "biuf":
         raise InputFileError(f"{name}: a mask must be a 2D numeric or bool array, got "
                              f"{array.dtype} {array.shape}")
-    parts = mask_contours(label_pixels(array, name, label), name, choice)
+    parts = mask_contours(_label_pixels(array, name, label), name, choice)
     frame = frame or ImageFrame(size=array.shape)
     return make_shape(name, np.vstack(parts), nodes=nodes or DEFAULT_NODES, frame=frame,
                       contours=_sizes(parts))
@@ -137,7 +137,7 @@ def _sizes(parts: list) -> tuple[int, ...] | None:
     return tuple(len(p) for p in parts) if len(parts) > 1 else None
 
 
-def label_pixels(array: np.ndarray, name: str, label) -> np.ndarray:
+def _label_pixels(array: np.ndarray, name: str, label) -> np.ndarray:
     """The object's pixels (bool) of a mask (the higher of two levels) or, with ``label``,
     of a label image."""
     if array.dtype.kind == "f" and not np.isfinite(array).all():
@@ -165,14 +165,18 @@ def _listed(levels: np.ndarray, most: int = 8) -> str:
 
 def image_contours(grey: np.ndarray, name: str, options: ReadOptions) -> list[np.ndarray]:
     """The boundaries (:func:`mask_contours`) of the object ``options`` choose in a 2D grey,
-    mask or label array: the pixels of ``options.label``, else of :func:`_image_mask`."""
+    mask or label array (:func:`object_mask`)."""
+    return mask_contours(object_mask(grey, name, options), name, options.object)
+
+
+def object_mask(grey: np.ndarray, name: str, options: ReadOptions) -> np.ndarray:
+    """The object's pixels (bool) of a grey, mask or label array of any dimension: those of
+    ``options.label``, else of :func:`_image_mask` (``options.threshold``)."""
     if options.label is None:
-        mask = _image_mask(grey, name, options.threshold)
-    elif options.threshold is not None:
+        return _image_mask(grey, name, options.threshold)
+    if options.threshold is not None:
         raise InputFileError(f"{name}: give label= or threshold=, not both")
-    else:
-        mask = label_pixels(grey, name, options.label)
-    return mask_contours(mask, name, options.object)
+    return _label_pixels(grey, name, options.label)
 
 
 def mask_contours(mask: np.ndarray, name: str, choice="largest") -> list[np.ndarray]:
@@ -199,7 +203,7 @@ def mask_contours(mask: np.ndarray, name: str, choice="largest") -> list[np.ndar
 
 
 def _image_mask(grey: np.ndarray, name: str, threshold: float | None) -> np.ndarray:
-    """The object side of a 2D grey or mask array (bool): the brighter of two levels or
+    """The object side of a grey or mask array (bool): the brighter of two levels or
     above ``threshold``, flipped when it covers most of the image's border."""
     if grey.dtype.kind == "f" and not np.isfinite(grey).all():
         raise InputFileError(f"{name}: the image has {np.count_nonzero(~np.isfinite(grey))} "
@@ -224,7 +228,9 @@ def _image_mask(grey: np.ndarray, name: str, threshold: float | None) -> np.ndar
             side = "above" if mask.all() else "at or below"
             raise InputFileError(f"{name}: no object in the image: every pixel is {side} the "
                                  f"threshold {threshold} (levels {levels[0]}..{levels[-1]})")
-    border = np.r_[mask[0], mask[-1], mask[1:-1, 0], mask[1:-1, -1]]
+    interior = np.zeros(mask.shape, dtype=bool)
+    interior[(slice(1, -1),) * mask.ndim] = True
+    border = mask[~interior]  # each cell on the array's border once, in any dimension
     if 2 * np.count_nonzero(border) > len(border):
         mask = ~mask  # the border is mostly "object": that side is the background
     return mask

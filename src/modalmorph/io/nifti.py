@@ -33,7 +33,7 @@ from ..core.shape import ImageFrame
 from ..errors import InputFileError
 from ..options import ReadOptions
 from .base import DEFAULT_NODES, RawShape
-from .images import choose_objects, image_contours, label_pixels
+from .images import choose_objects, image_contours, object_mask
 
 __all__ = ["NIFTI_EXTENSIONS", "VOLUME_SMOOTHING", "nifti_frames", "nifti_grid", "nifti_slices",
            "read_nifti"]
@@ -79,16 +79,7 @@ def _volume_surface(image, name: str, options: ReadOptions) -> RawShape:
         data = np.asanyarray(image.dataobj).reshape(image.shape[:3])
     except (OSError, ValueError, EOFError, MemoryError) as exc:
         raise InputFileError(f"{name}: cannot read the NIfTI data: {_line(exc)}") from None
-    if options.label is not None and options.threshold is not None:
-        raise InputFileError(f"{name}: give label= or threshold=, not both")
-    if options.threshold is not None:
-        mask = data > options.threshold
-        if mask.all() or not mask.any():
-            raise InputFileError(f"{name}: no object in the volume: every voxel is "
-                                 f"{'above' if mask.any() else 'at or below'} the threshold "
-                                 f"{options.threshold}")
-    else:
-        mask = label_pixels(data, name, options.label)
+    mask = object_mask(data, name, options)
     chosen = np.logical_or.reduce(choose_objects(mask, options.object, name))
     box = ndimage.find_objects(chosen.astype(np.int8))[0]  # work on the object's box only
     chosen = np.pad(chosen[box], 2)
