@@ -605,8 +605,8 @@ def test_mesh_quads_and_point_cloud(tmp_path):
 
 def test_mesh_files_meshio_refuses(tmp_path):
     """A range scanner's PLY (a ``camera`` element beside the vertices and faces: MeshLab's
-    range maps) and a textured OBJ (fewer texture coordinates than vertices) are valid
-    files meshio refuses: they read as the surfaces they hold."""
+    range maps), a textured OBJ (fewer texture coordinates than vertices) and trimesh's
+    ASCII STL are valid files meshio refuses: they read as the surfaces they hold."""
     points, faces = _icosphere()
     header = ["ply", "format ascii 1.0", "element camera 1", "property float view_px",
               "property float view_py", f"element vertex {len(points)}", "property float x",
@@ -622,6 +622,13 @@ def test_mesh_files_meshio_refuses(tmp_path):
         "f " + " ".join(f"{i + 1}/{k + 1}" for k, i in enumerate(f)) for f in faces]
     (tmp_path / "textured.obj").write_text("\n".join(lines) + "\n")
     _same_surface(read_shape(tmp_path / "textured.obj"), points, faces, atol=1e-6)
+
+    # an ASCII STL with a blank line before ``endsolid``, as trimesh writes it
+    facets = ["facet normal 0 0 1\nouter loop\n" + "".join(
+        f"vertex {x:.9g} {y:.9g} {z:.9g}\n" for x, y, z in points[f]) + "endloop\nendfacet"
+        for f in faces]
+    (tmp_path / "ascii.stl").write_text("solid s\n" + "\n".join(facets) + "\n\nendsolid\n")
+    _same_surface(read_shape(tmp_path / "ascii.stl"), points, faces, atol=1e-6)
 
 
 def test_mesh_unreadable(tmp_path):

@@ -122,6 +122,14 @@ def test_self_intersections_found_and_said():
     assert intersection_sentence(None) == ""
     assert intersection_sentence(np.array([0, 4, 0, 2])) == (
         "; 2 of 4 steps' surfaces intersect themselves (up to 4 faces, first at step 1)")
+    # a source that cuts itself as given (pymeshlab's cow: 89 faces at every step) is
+    # named as such, and only steps with more are said to intersect
+    assert intersection_sentence(np.array([89, 89, 89])) == (
+        "; the source surface intersects itself as given (89 faces), and no step adds any")
+    assert intersection_sentence(np.array([5, 5, 7, 5]), model_nodes=10, nodes=20) == (
+        "; the source surface intersects itself as given (5 faces); 1 of 4 steps' surfaces "
+        "intersect themselves (up to 7 faces, more than the source's 5, first at step 2); "
+        "model_nodes=20 (a model of every node, not 10) may avoid them")
 
 
 def test_morph_says_self_intersections(monkeypatch):

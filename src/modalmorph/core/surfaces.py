@@ -162,16 +162,23 @@ def unlike_sentence(pairs: np.ndarray, m: int, n: int) -> str:
 
 def intersection_sentence(counts, *, model_nodes: int | None = None,
                           nodes: int | None = None, turn: float | None = None) -> str:
-    """What a morph's message adds about its self-intersections: nothing when none of its
-    steps has any (or they were not checked); when the pairs turn the source by ``turn``
-    degrees, more than ``TURN_HINT``, and the morph takes that turn as a deformation, the
-    hint to remove it first; else with a reduced model (``model_nodes`` < ``nodes``), the
-    hint to model every node, which avoided them on the bunny when the reduced model
-    moved with the element's field (method.md §5)."""
-    if counts is None or not np.any(counts):
+    """What a morph's message adds about its self-intersections (``counts[0]``: the
+    source's own, as given; a scan or a sculpted mesh may have some): nothing when no step
+    has more than the source; the source's own count when it has some; for steps with
+    more, when the pairs turn the source by ``turn`` degrees, more than ``TURN_HINT``, and
+    the morph takes that turn as a deformation, the hint to remove it first; else with a
+    reduced model (``model_nodes`` < ``nodes``), the hint to model every node, which
+    avoided them on the bunny when the reduced model moved with the element's field
+    (method.md §5)."""
+    if counts is None:
         return ""
     counts = np.asarray(counts)
-    steps = np.flatnonzero(counts)  # step 0: the source itself
+    own = int(counts[0])
+    said = (f"; the source surface intersects itself as given ({own} faces)" if own
+            else "")
+    steps = np.flatnonzero(counts > own)
+    if not len(steps):
+        return said + (", and no step adds any" if own else "")
     hint = (f"; model_nodes={nodes} (a model of every node, not {model_nodes}) may avoid "
             f"them" if model_nodes is not None and nodes is not None and model_nodes < nodes
             else "")
@@ -179,5 +186,6 @@ def intersection_sentence(counts, *, model_nodes: int | None = None,
         hint = (f"; the pairs turn the source by {turn:.0f} deg, which the morph takes "
                 f"straight, through a flattened shape: remove_rigid=true (the turn taken "
                 f"first) may avoid them")
-    return (f"; {len(steps)} of {len(counts)} steps' surfaces intersect themselves "
-            f"(up to {counts.max()} faces, first at step {steps[0]}){hint}")
+    more = f"faces, more than the source's {own}" if own else "faces"
+    return (f"{said}; {len(steps)} of {len(counts)} steps' surfaces intersect themselves "
+            f"(up to {counts.max()} {more}, first at step {steps[0]}){hint}")

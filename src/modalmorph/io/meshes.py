@@ -1,8 +1,9 @@
 """Meshes, read with meshio: a 3D triangle surface or, with no surface cells, a point cloud.
 
-PLY and OBJ files that meshio refuses but graphics software writes (a PLY with further
+PLY, OBJ and STL files that meshio refuses but graphics software writes (a PLY with further
 elements, such as a range scanner's ``camera``; an OBJ with fewer texture coordinates than
-vertices) are read with trimesh, the graphics library, instead.
+vertices; an ASCII STL with a blank line, as trimesh writes it) are read with trimesh, the
+graphics library, instead.
 
 Quads and polygons are split into triangles (a fan from their first corner); points no
 triangle uses and exactly repeated points are dropped, and so are the triangles that
@@ -25,7 +26,7 @@ from .base import RawShape
 
 __all__ = ["read_mesh"]
 
-GRAPHICS_FORMATS = (".ply", ".obj")  # read with trimesh where meshio refuses them
+GRAPHICS_FORMATS = (".ply", ".obj", ".stl")  # read with trimesh where meshio refuses them
 
 
 def read_mesh(path: Path, name: str, options: ReadOptions) -> RawShape:
