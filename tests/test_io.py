@@ -288,6 +288,19 @@ def test_svg_white_on_a_dark_page_shows(tmp_path):
                                                                       180)
 
 
+def test_svg_choice_is_logged_in_user_units(tmp_path, caplog):
+    """The logged size of the outline read is in the file's user units (the results'),
+    not in the viewport's px: a page of 100 mm drawn with a viewBox of 100 units."""
+    path = tmp_path / "mm.svg"
+    path.write_text('<svg xmlns="http://www.w3.org/2000/svg" width="100mm" height="80mm" '
+                    'viewBox="0 0 100 80"><rect width="40" height="30" x="5" y="5"/>'
+                    '<circle cx="80" cy="60" r="3"/></svg>')
+    with caplog.at_level(logging.INFO, logger="modalmorph"):
+        shape = read_shape(path)
+    assert_allclose(np.ptp(shape.points, axis=0), [40, 30], rtol=1e-6)
+    assert "<rect> 40 x 30;" in caplog.text
+
+
 def test_svg_object_choice(tmp_path):
     """object= picks an outline as for images: a number in the order drawn, the one
     centred nearest the page's centre, or all of them as contours."""

@@ -116,7 +116,10 @@ def _chosen(se, svg, name: str, choice) -> list:
     else:
         pick, why = choice - 1, "as asked"
     if len(drawn) > 1:
-        w, h = boxes[pick, 2:] - boxes[pick, :2]
+        w, h = boxes[pick, 2:] - boxes[pick, :2]  # in the viewport (px): in user units
+        if svg.viewbox is not None:  # (the results' units) as read, below
+            scale = se.Matrix(svg.viewbox_transform)
+            w, h = w / abs(scale.a), h / abs(scale.d)
         _log.info("%s: outline %d of %d drawing a shape (%s): <%s> %.4g x %.4g; %d drawing "
                   "none passed over; object= chooses another", name, pick + 1, len(shapes),
                   why, type(shapes[pick]).__name__.lower(), w, h, len(drawn) - len(shapes))
