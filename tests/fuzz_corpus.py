@@ -35,7 +35,7 @@ OCTA_POINTS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1],
 OCTA_FACES = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5],
                        [3, 1, 5], [0, 3, 5]])
 _MESH_EXTS = (".ply", ".obj", ".stl", ".off", ".vtk", ".vtu", ".msh", ".mesh")
-_IMAGE_EXTS = (".png", ".tif", ".jpg", ".bmp")
+_IMAGE_EXTS = (".png", ".tif", ".jpg", ".bmp", ".gif")
 
 
 def _text(points, sep=",", header=True) -> bytes:

@@ -202,9 +202,10 @@ def write_inputs(kind, tmp_path, masks):
         for f, image in enumerate(images):  # natural order: frame10 after frame2
             image.save(tmp_path / f"frame{f * 5}.png")
         return [tmp_path]
-    if kind == "tiff":
-        images[0].save(tmp_path / "stack.tif", save_all=True, append_images=images[1:])
-        return [tmp_path / "stack.tif"]
+    if kind in ("tiff", "gif"):  # a multi-page TIFF, an animated GIF
+        path = tmp_path / f"stack.{kind[:3]}"
+        images[0].save(path, save_all=True, append_images=images[1:])
+        return [path]
     from modalmorph.io import read_frames
 
     shapes = read_frames(list(tmp_path.glob("*.png")) or write_inputs("png", tmp_path, masks),
@@ -213,7 +214,7 @@ def write_inputs(kind, tmp_path, masks):
     return [tmp_path / "seq.npz"]
 
 
-@pytest.mark.parametrize("kind", ["png", "tiff", "npz"])
+@pytest.mark.parametrize("kind", ["png", "tiff", "gif", "npz"])
 def test_cli_track(kind, tmp_path):
     from modalmorph.apps.cli import main
 

@@ -216,7 +216,7 @@ def strain(frames, *, options: StrainOptions | None = None,
         Myocardium masks (non-zero, or ``label``, is the wall), ring Shapes (the
         epicardium first, then the endocardium: ``Shape(np.vstack([epi, endo]),
         contours=(n_epi, n_endo))``), or files: a folder or list of PNG/TIFF images, a
-        multi-page TIFF, an NPY/NPZ (F, H, W) stack, a NIfTI 2D+t image.
+        multi-page TIFF or animated GIF, an NPY/NPZ (F, H, W) stack, a NIfTI 2D+t image.
     options : StrainOptions, optional
     names : sequence of str, optional
         A name per frame for messages (default: file names or ``"frame <i>"``).

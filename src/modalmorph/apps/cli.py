@@ -229,9 +229,9 @@ def _morph_parser(p) -> None:
 def _track_parser(p) -> None:
     p.add_argument("inputs", nargs="+", type=Path, metavar="INPUTS",
                    help="the frames: several files, or one folder or glob pattern of images "
-                        "or CSVs (natural order), a multi-page TIFF, an (F, H, W) NPY stack "
-                        "of masks, an NPZ with an (F, n, d) array, or a CSV with a frame "
-                        "column")
+                        "or CSVs (natural order), a multi-page TIFF or animated GIF, an "
+                        "(F, H, W) NPY stack of masks, an NPZ with an (F, n, d) array, or a "
+                        "CSV with a frame column")
     p.add_argument("-o", "--out", type=Path, required=True,
                    help="output folder (replaced as a whole)")
     _add_config(p)

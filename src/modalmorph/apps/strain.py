@@ -41,7 +41,8 @@ def register(command, add_option_flags) -> None:
                 "segment (percent), strain rates, peaks, figures and an HTML report.")
     p.add_argument("inputs", nargs="+", type=Path, metavar="FRAMES",
                    help="myocardium masks: PNG/TIFF files or a folder of them, a "
-                        "multi-page TIFF, an (F, H, W) NPY/NPZ stack, a NIfTI 2D+t image")
+                        "multi-page TIFF or animated GIF, an (F, H, W) NPY/NPZ stack, a "
+                        "NIfTI 2D+t image")
     p.add_argument("-o", "--out", type=Path, required=True,
                    help="output folder (replaced as a whole)")
     p.add_argument("--html", action="store_true", help="also report.html")

@@ -10,7 +10,7 @@ extensions                             content                             modul
 ``.json``                              ``[[x, y], ...]`` or an object      :mod:`.points`
 ``.svg``                               one outline (path, polygon, etc.)   :mod:`.svg`
 ``.png`` ``.tif`` ``.tiff`` ``.jpg``   one object's contours (and holes)   :mod:`.images`
-``.jpeg`` ``.bmp``
+``.jpeg`` ``.bmp`` ``.gif``
 ``.ply`` ``.obj`` ``.stl`` ``.off``    a triangle surface or point cloud   :mod:`.meshes`
 ``.vtk`` ``.vtu`` ``.msh`` ``.mesh``
 ``.nii`` ``.nii.gz``                   a label slice or volume, in mm      :mod:`.nifti`
@@ -132,7 +132,8 @@ READERS: dict[str, Reader] = {
     ".json": read_json,
     ".svg": read_svg,
     ".png": read_image, ".tif": read_image, ".tiff": read_image, ".jpg": read_image,
-    ".jpeg": read_image, ".bmp": read_image, ".nii": read_nifti, ".nii.gz": read_nifti,
+    ".jpeg": read_image, ".bmp": read_image, ".gif": read_image,
+    ".nii": read_nifti, ".nii.gz": read_nifti,
     ".ply": read_mesh, ".obj": read_mesh, ".stl": read_mesh, ".off": read_mesh,
     ".vtk": read_mesh, ".vtu": read_mesh, ".msh": read_mesh, ".mesh": read_mesh,
 }
@@ -261,7 +262,7 @@ def read_frames(inputs, options: ReadOptions | None = None, **overrides) -> Fram
         - a folder: its files with a supported extension (images or CSVs, ...), in natural
           order (``frame2`` before ``frame10``);
         - a glob pattern (``"masks/*.png"``), in natural order;
-        - a multi-page TIFF: one mask or grey image per page;
+        - a multi-page TIFF or an animated GIF: one mask or grey image per page;
         - a NIfTI file (``.nii``, ``.nii.gz``) of a 2D+t label volume, in mm (see
           :mod:`.nifti`);
         - an ``.npy`` file, or an ``.npz`` file's ``points`` (or only) array: an

@@ -302,7 +302,7 @@ def _largest_object(area: np.ndarray, border: np.ndarray, name: str) -> tuple[in
 def grey_levels(image, name: str = "image") -> np.ndarray:
     """A 2D array of grey levels from a PIL image, or its alpha channel as a 0/1 mask
     when that is a real mask (:func:`_alpha_mask`)."""
-    image.seek(0)  # the first frame of a multi-page TIFF
+    image.seek(0)  # the first frame of a multi-page TIFF or animated GIF
     if "A" in image.getbands():
         mask = _alpha_mask(np.asarray(image.getchannel("A")), name)
         if mask is not None:

@@ -22,7 +22,7 @@ from .sequences import image_pages, sequence_files
 
 __all__ = ["MASK_FILES", "Masks", "read_masks"]
 
-MASK_FILES = (".png", ".tif", ".tiff", ".bmp", ".npy", ".npz", *NIFTI_EXTENSIONS)
+MASK_FILES = (".png", ".tif", ".tiff", ".bmp", ".gif", ".npy", ".npz", *NIFTI_EXTENSIONS)
 
 
 @dataclass(frozen=True)

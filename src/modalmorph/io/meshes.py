@@ -64,8 +64,9 @@ def _meshio_read(meshio, path: Path, name: str):
             mesh = meshio.read(path)
     except (Exception, SystemExit) as exc:  # meshio raises many types for a bad file
         printed = " ".join(said.getvalue().split())
-        detail = printed if isinstance(exc, SystemExit) else f"{type(exc).__name__}: {exc}" + (
-            f" (meshio: {printed})" if printed else "")
+        detail = printed if isinstance(exc, SystemExit) else (
+            f"{type(exc).__name__}: {' '.join(str(exc).split())}"  # one line: numpy's
+            + (f" (meshio: {printed})" if printed else ""))      # errors list lines
         raise InputFileError(f"{name}: cannot read the mesh: {detail}") from None
     if said.getvalue().strip():
         warnings.warn(f"{name}: meshio: {' '.join(said.getvalue().split())}", stacklevel=4)

@@ -1,5 +1,6 @@
 """Sequences of shapes (frames): the files of a glob pattern or a folder, and the files
-that hold several frames (multi-page TIFF, NPY/NPZ stacks, text with a ``frame`` column).
+that hold several frames (multi-page TIFF, animated GIF, NPY/NPZ stacks, text with a
+``frame`` column).
 
 :func:`modalmorph.io.read_frames` is the entry point; it reads single-frame files with
 :func:`modalmorph.io.read_shape`, which it passes to :func:`file_frames`.
@@ -30,7 +31,7 @@ __all__ = ["Frames", "check_grids", "file_frames", "image_pages", "natural_key",
 # The files that may hold several frames (by extension); any other is one frame.
 _STACKS = (".npy", ".npz")
 _TABLES = tuple(TEXT_SEPARATORS)
-_PAGED = (".tif", ".tiff")
+_PAGED = (".tif", ".tiff", ".gif")
 
 
 @dataclasses.dataclass(frozen=True)
