@@ -74,8 +74,9 @@ def test_text_written_with_a_header(tmp_path):
     "\ufeffx,y\r\n0,0\r\n2,0\r\n2,1\r\n0.5,1.5\r\n0,1\r\n",  # BOM and CRLF
     "id,y,x,label\n1,0,0,a\n2,0,2,b\n3,1,2,c\n4,1.5,0.5,d\n5,1,0,e\n",  # named columns
     "0,0\n2,0\n2,1\n0.5,1.5\n0,1\n0,0\n",  # closed contour written with its first node
+    "0,0\n2,0\n2,0\n2,1\n0.5,1.5\n0.5,1.5\n0.5,1.5\n0,1\n0,0\n",  # doubled nodes
 ], ids=["plain", "header", "quoted", "spaces", "tabs", "whitespace", "semicolon", "bom",
-        "named", "repeated-first"])
+        "named", "repeated-first", "doubled"])
 def test_text_variants(tmp_path, text):
     path = tmp_path / "shape.csv"
     path.write_text(text, encoding="utf-8")
@@ -667,7 +668,7 @@ def test_mesh_unreadable(tmp_path):
     ("narrow.csv", "1\n2\n3\n", "line 1 has 1 column, expected 2 or 3"),
     ("ragged.csv", "# c\n1,2\n3,4\n5,6,7\n", "line 4 has 3 columns, expected 2 like line 2"),
     ("wideheader.csv", "a,b,c,d\n1,2,3,4\n", "line 1 .header. has 4 columns"),
-    ("repeat.csv", "0,0\n1,0\n1,0\n0,1\n", "repeated nodes"),
+    ("repeat.csv", "0,0\n1,0\n0,1\n1,0\n0.5,-1\n", "node 1 and node 3 coincide"),
     ("point.csv", "1,1\n1,1\n1,1\n1,1\n", "lie .nearly. at one point"),
     ("binary.csv", b"\xff\xfe\x00\x01", "not a text file"),
     ("bad.json", "[[0, 0], [1, 0]", "not valid JSON"),

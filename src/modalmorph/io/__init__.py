@@ -48,6 +48,7 @@ resampling and the :class:`~modalmorph.core.shape.Shape`.
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 
@@ -125,6 +126,8 @@ __all__ = [
     "y_down",
 ]
 
+_log = logging.getLogger(__name__)
+
 # THE reader table: a file's extension (lower case) -> the function reading it.
 READERS: dict[str, Reader] = {
     ".csv": read_text, ".tsv": read_text, ".txt": read_text, ".xyz": read_xyz,
@@ -194,7 +197,7 @@ def read_shape(path, options: ReadOptions | None = None, *, closed: bool | None 
         closed = True if raw.closed is None else raw.closed
     pts, contours = raw.points, raw.contours
     if raw.drop_closing_repeat and raw.faces is None:
-        pts, contours = _drop_closing_repeats(pts, contours)
+        pts, contours = _drop_repeats(pts, contours, name)
     frame = raw.frame
     if opts.flip_y and frame is None and pts.ndim == 2 and pts.shape[1] == 2:
         pts, frame = pts * [1.0, -1.0], FLIPPED_FRAME  # y up -> image coordinates
@@ -205,16 +208,24 @@ def read_shape(path, options: ReadOptions | None = None, *, closed: bool | None 
                       contours=contours)
 
 
-def _drop_closing_repeats(pts: np.ndarray, contours) -> tuple[np.ndarray, tuple | None]:
-    """Each contour's last node dropped where it repeats its first (written closed)."""
+def _drop_repeats(pts: np.ndarray, contours, name: str) -> tuple[np.ndarray, tuple | None]:
+    """Each contour's nodes that repeat the node before them exactly (a digitiser's or an
+    exporter's doubled points; said in the log) and its last node where it repeats its
+    first (written closed), dropped: they carry no shape, and a model of two nodes at one
+    place has no solution."""
     sizes = contours or (len(pts),)
     ends = np.cumsum(sizes)
     keep = np.ones(len(pts), dtype=bool)
+    keep[1:] = np.any(pts[1:] != pts[:-1], axis=1)
+    keep[ends[:-1]] = True  # a contour's first node never repeats the last contour's
+    doubled = int(np.count_nonzero(~keep))
     for k, end in zip(sizes, ends, strict=True):
         if k > 1 and end <= len(pts) and np.array_equal(pts[end - k], pts[end - 1]):
             keep[end - 1] = False
-    if keep.all():
+    if keep.all() or np.count_nonzero(keep) < 3:  # a point: the shape's check says so
         return pts, contours
+    if doubled:
+        _log.info("%s: %d node(s) repeating the node before them dropped", name, doubled)
     if contours is None:
         return pts[keep], None
     return pts[keep], tuple(int(np.count_nonzero(keep[e - k:e])) for k, e in zip(
