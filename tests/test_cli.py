@@ -196,6 +196,9 @@ def test_bad_option_exits_2(hand_csvs, tmp_path, capsys):
     out = tmp_path / "out"
     assert _run("morph", *hand_csvs, "--out", out, "--k", "-5") == 2
     assert "k must be a number in" in capsys.readouterr().err
+    assert _run("morph", *hand_csvs, "--out", out, "--material", "steel") == 2
+    assert ("material must be one of polyethylene, rubber, unit or three numbers E nu rho, "
+            "got 'steel'") in capsys.readouterr().err  # it said 'must be a number'
     assert _run("morph", *hand_csvs, "--out", out, "--bogus") == 2
     assert not out.exists()
 

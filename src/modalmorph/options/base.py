@@ -105,7 +105,13 @@ def parse_value(name: str, kind: str, value):
         return None
     if kind == "material" and text in MATERIALS:
         return MATERIALS[text]
-    numbers = [_number(name, token) for token in text.replace(",", " ").split()]
+    try:
+        numbers = [_number(name, token) for token in text.replace(",", " ").split()]
+    except OptionError:
+        if kind == "material":  # a name not known
+            raise OptionError(f"{name} must be one of {', '.join(MATERIALS)} or three "
+                              f"numbers E nu rho, got {text!r}") from None
+        raise
     return _typed(name, kind, numbers[0] if len(numbers) == 1 else numbers)
 
 
