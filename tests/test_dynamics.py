@@ -71,6 +71,40 @@ def test_arclength_rule_backwards_round_a_closed_target():
     assert np.all(np.diff(near) >= 0)
 
 
+# The stem of a sans-serif 'i' (4 nodes, DejaVu Sans) and of a serif one (10 nodes, DejaVu
+# Serif: a foot of 26 units, a top serif), as matplotlib's TextPath gives them.
+STEM = np.array([[9.42, 54.69], [18.41, 54.69], [18.41, 0.0], [9.42, 0.0]])
+SERIF = np.array([[21.19, 5.17], [29.69, 5.17], [29.69, 0.0], [3.61, 0.0], [3.61, 5.17],
+                  [12.2, 5.17], [12.2, 46.69], [3.61, 46.69], [3.61, 51.91], [21.19, 51.91]])
+
+
+def test_arclength_rule_follows_the_partners_way_round_not_the_shorter():
+    """A stretch of more than half the target is walked the way the partners run round it:
+    the stem's foot corners (freed: they cannot cover the serif foot alone) land on the
+    foot, not on the top serif, the shorter way from node 1's partner to node 0's."""
+    t = LoadTargets(STEM, SERIF, np.c_[[0, 1, 2, 3], [6, 9, 0, 5]], ordered=True,
+                    closed=(True, True))
+    assert t.turn == 1
+    assert_allclose(t.targets(STEM)[2:, 1], 0.0, atol=1e-9)  # on the foot's bottom (y = 0)
+    assert np.all(np.diff(t.targets(STEM)[2:, 0]) < 0)  # in the source's order
+
+
+def test_two_partners_half_round_apart_take_the_contours_orientation():
+    """Two matched nodes whose partners lie half the target apart say nothing of the way
+    round: the contours' orientations do (both the same way: forwards). An exclamation
+    mark's bar (6 nodes, DejaVu Sans Mono) onto a drop (18 nodes, STIX): the bar's top
+    corners land on the drop's top, not on its bottom tip (the shorter way)."""
+    bar = np.array([[25.2, 72.9], [35.1, 72.9], [35.1, 40.9], [34.1, 23.5], [26.2, 23.5],
+                    [25.2, 40.9]])
+    drop = np.array([[17.5, 17.6], [13.3, 55.7], [13.1, 58.3], [13.0, 60.0], [13.1, 61.8],
+                     [13.7, 64.6], [15.1, 66.5], [17.1, 67.5], [18.3, 67.6], [19.5, 67.5],
+                     [21.4, 66.4], [22.2, 65.4], [22.8, 64.2], [23.5, 61.3], [23.6, 59.5],
+                     [23.5, 57.8], [23.4, 55.7], [18.9, 17.6]])
+    t = LoadTargets(bar, drop, np.c_[[2, 5], [16, 1]], ordered=True, closed=(True, True))
+    assert t.turn == 1
+    assert np.all(t.targets(bar)[[0, 1], 1] > 60)  # on the drop's top (55.7..67.6)
+
+
 def test_newmark_free_oscillator_conserves_energy():
     """delta = 1/2, alpha = 1/4 (average acceleration): no numerical damping."""
     w = np.array([1.0, 3.0])
