@@ -1,5 +1,7 @@
 """Shape validation: every bad input names its problem."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -32,6 +34,16 @@ SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 def test_bad_points(points, match):
     with pytest.raises(ValueError, match=match):
         Shape(points)
+
+
+def test_a_file_name_is_not_coordinates():
+    """as_shape (morph, match) names a file given where coordinates go, and the reader."""
+    from modalmorph.core.shape import as_shape
+
+    for path in ("a.csv", Path("a.csv")):
+        with pytest.raises(ValueError, match=r"source is a file name \('a.csv'\), not "
+                                             r"coordinates: read it with modalmorph.read_shape"):
+            as_shape(path, "source")
 
 
 def test_bad_faces():

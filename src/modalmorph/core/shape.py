@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import os
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -359,6 +360,10 @@ def as_shape(obj, name: str = "shape") -> Shape:
     """Return ``obj`` if it is a :class:`Shape`, else build one from an (m, d) array."""
     if isinstance(obj, Shape):
         return obj
+    if isinstance(obj, str | os.PathLike):
+        raise ShapeError(f"{name} is a file name ({os.fspath(obj)!r}), not coordinates: read "
+                         f"it with modalmorph.read_shape(path), or give an (m, 2) or (m, 3) "
+                         f"array or a Shape")
     try:
         return Shape(obj)
     except ValueError as exc:
