@@ -837,7 +837,7 @@ def test_save_result(tmp_path):
         "message": morph.message, "distance": morph.distance, "tolerance": morph.tolerance,
         "steps": morph.steps, "matches": 6, "source_nodes": 12, "target_nodes": 12, "dim": 2,
         "mean_distance": morph.mean_distance.tolist(), "energy": morph.energy.tolist(),
-        "self_intersections": None,  # a contour: only surfaces are checked
+        "self_intersections": [0] * (morph.steps + 1),  # a contour that never crosses
     }
     assert result["parameters"]["k"] == morph.options.k
     assert result["parameters"]["model_nodes"] == morph.resolved.model_nodes == 12

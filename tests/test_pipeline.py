@@ -1,6 +1,7 @@
 """morph(): the paper's findings as trends, and the invariants of the method."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -53,6 +54,21 @@ def test_full_resolution_hands_with_the_matcher():
     assert r.converged and r.steps <= 100
     assert r.mean_distance[-1] <= 0.01 * _rms(b)
     assert all(self_intersections(s) == 0 for s in r.shapes)
+
+
+def test_a_contour_folded_through_itself_is_said():
+    """A hand onto another turned half round: the morph takes the turn straight, through a
+    flattened shape whose segments cross; the result counts them at every step and the
+    message says so with the hint; the turn taken first, no step crosses."""
+    a, b, pairs = _hands(0, 1, 100)
+    r = morph(a, _rotate(b, np.pi), matching=pairs)
+    assert_array_equal(r.self_intersections, [self_intersections(s) for s in r.shapes])
+    assert r.self_intersections[0] == 0 and r.self_intersections.max() > 0
+    assert "steps' contours cross themselves" in r.message
+    turn = re.search(r"the pairs turn the source by (\d+) deg", r.message)
+    assert turn and int(turn[1]) > 150
+    turned = morph(a, _rotate(b, np.pi), matching=pairs, remove_rigid=True)
+    assert not np.any(turned.self_intersections) and "cross" not in turned.message
 
 
 def test_result_fields_consistent():

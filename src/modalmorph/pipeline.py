@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .core.align import Similarity, align
-from .core.quality import check_contours
+from .core.quality import check_contours, step_crossings
 from .core.shape import Shape, as_shape
 from .core.surfaces import intersection_sentence, step_self_intersections, unlike_sentence
 from .errors import MorphDivergedError, OptionError, ShapeError
@@ -78,8 +78,10 @@ class Morph(Run):
     self_intersections : ndarray of int, shape (T+1,), or None
         For surfaces (a source with faces): the number of the surface's triangles that
         cut another of its triangles, at every step (:mod:`modalmorph.core.surfaces`;
-        ``message`` says so when any is not 0). None for other objects, or when
-        pymeshlab, which finds them, is not installed.
+        None when pymeshlab, which finds them, is not installed). For 2D contours: the
+        number of pairs of their segments that cross, at every step
+        (:func:`modalmorph.core.quality.step_crossings`). ``message`` says so when a step
+        has more than the source. None for other objects.
     """
 
     matching: Matching
@@ -166,11 +168,13 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
     crossed = None
     if src.dim == 3 and src.has_faces:
         crossed = step_self_intersections(run.shapes, src.faces)
+    elif src.dim == 2 and src.ordered:  # a contour folded through itself
+        crossed = step_crossings(run.shapes, src)
     turn = None
     if crossed is not None and np.any(crossed) and not options.remove_rigid:
         turn = align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]], scale=True).angle
     said = intersection_sentence(crossed, model_nodes=run.resolved.model_nodes, nodes=src.m,
-                                 turn=turn)
+                                 turn=turn, contours=src.dim == 2)
     if sim.system.partners is not None:
         said += _unpaired(src, tgt, sim.system.partners)
     if src.dim == 3 and not src.ordered and not run.converged:

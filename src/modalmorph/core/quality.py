@@ -17,7 +17,7 @@ from .shape import check_once, resample
 
 __all__ = ["Polyline", "area", "check_contours", "correspondence_rotation",
            "curve_distances", "roughness", "self_crossings", "crossing_segments", "LOOP_AREA",
-           "check_simple", "check_flat", "FLAT"]
+           "check_simple", "check_flat", "FLAT", "step_crossings"]
 
 # Vertices whose segments curve_distances tests first (4: 2.5x faster than 8; method.md §5).
 _K_NEAREST = 4
@@ -302,6 +302,18 @@ def _check_contours(shape, name: str) -> None:
             raise ShapeError(f"{name}: contour {part[i]} crosses contour {part[j]} near "
                              f"({x[0]:.4g}, {x[1]:.4g}); contours of one shape must not "
                              "cross (a hole lies inside its outer boundary)")
+
+
+def step_crossings(shapes, shape) -> np.ndarray:
+    """The pairs of segments that cross (:func:`crossing_segments`, within a contour or
+    between two) of a 2D ordered :class:`Shape`'s topology on the nodes of every step,
+    shape (T+1,), int: a contour folded through itself shows there. (About 0.1 ms a step
+    of 70 or 250 nodes, 0.3 ms of 1000; one pass over the segment pairs that overlap at
+    any step took 24 ms at 250 nodes and 4 s at 1000 for a half turn, which sweeps the
+    shape over itself.)"""
+    edges = shape.edges
+    return np.array([len(crossing_segments(points, edges=edges)) for points in shapes],
+                    dtype=np.int64)
 
 
 def roughness(points, closed: bool = True) -> float:

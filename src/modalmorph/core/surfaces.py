@@ -161,31 +161,35 @@ def unlike_sentence(pairs: np.ndarray, m: int, n: int) -> str:
 
 
 def intersection_sentence(counts, *, model_nodes: int | None = None,
-                          nodes: int | None = None, turn: float | None = None) -> str:
-    """What a morph's message adds about its self-intersections (``counts[0]``: the
-    source's own, as given; a scan or a sculpted mesh may have some): nothing when no step
-    has more than the source; the source's own count when it has some; for steps with
-    more, when the pairs turn the source by ``turn`` degrees, more than ``TURN_HINT``, and
-    the morph takes that turn as a deformation, the hint to remove it first; else with a
-    reduced model (``model_nodes`` < ``nodes``), the hint to model every node, which
-    avoided them on the bunny when the reduced model moved with the element's field
-    (method.md §5)."""
+                          nodes: int | None = None, turn: float | None = None,
+                          contours: bool = False) -> str:
+    """What a morph's message adds about its self-intersections: faces that cut another
+    at each step of a surface, or with ``contours`` segments that cross another of a 2D
+    shape (``counts[0]``: the source's own, as given; a scan or a sculpted mesh may have
+    some): nothing when no step has more than the source; the source's own count when it
+    has some; for steps with more, when the pairs turn the source by ``turn`` degrees,
+    more than ``TURN_HINT``, and the morph takes that turn as a deformation, the hint to
+    remove it first; else for a surface with a reduced model (``model_nodes`` <
+    ``nodes``), the hint to model every node, which avoided them on the bunny when the
+    reduced model moved with the element's field (method.md §5)."""
     if counts is None:
         return ""
     counts = np.asarray(counts)
     own = int(counts[0])
-    said = (f"; the source surface intersects itself as given ({own} faces)" if own
-            else "")
+    what, cut, cuts, parts = (
+        ("contours", "cross themselves", "crosses itself", "crossings") if contours else
+        ("surfaces", "intersect themselves", "intersects itself", "faces"))
+    said = f"; the source {what[:-1]} {cuts} as given ({own} {parts})" if own else ""
     steps = np.flatnonzero(counts > own)
     if not len(steps):
         return said + (", and no step adds any" if own else "")
     hint = (f"; model_nodes={nodes} (a model of every node, not {model_nodes}) may avoid "
-            f"them" if model_nodes is not None and nodes is not None and model_nodes < nodes
-            else "")
+            f"them" if not contours and model_nodes is not None and nodes is not None
+            and model_nodes < nodes else "")
     if turn is not None and turn > TURN_HINT:
         hint = (f"; the pairs turn the source by {turn:.0f} deg, which the morph takes "
                 f"straight, through a flattened shape: remove_rigid=true (the turn taken "
                 f"first) may avoid them")
-    more = f"faces, more than the source's {own}" if own else "faces"
-    return (f"{said}; {len(steps)} of {len(counts)} steps' surfaces intersect themselves "
+    more = f"{parts}, more than the source's {own}" if own else parts
+    return (f"{said}; {len(steps)} of {len(counts)} steps' {what} {cut} "
             f"(up to {counts.max()} {more}, first at step {steps[0]}){hint}")

@@ -96,8 +96,9 @@ def result_summary(morph, *, options: dict | None = None, inputs: list | None = 
           "dim": int,                     # 2 or 3
           "mean_distance": [float, ...],  # T + 1 values, per step (step 0 = source)
           "energy": [float, ...],         # T + 1 values, strain energy per step
-          "self_intersections": [int, ...] or null  # surfaces: faces cutting another
-        }                                           # face, per step (null: not checked)
+          "self_intersections": [int, ...] or null  # per step: surfaces, faces cutting
+        }                          # another; 2D contours, pairs of segments that cross;
+                                   # null: not checked (point sets, no pymeshlab)
     """
     return {
         "modalmorph_version": __version__,
