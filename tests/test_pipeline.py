@@ -56,10 +56,14 @@ def test_full_resolution_hands_with_the_matcher():
     assert all(self_intersections(s) == 0 for s in r.shapes)
 
 
-def test_a_contour_folded_through_itself_is_said():
-    """A hand onto another turned half round: the morph takes the turn straight, through a
-    flattened shape whose segments cross; the result counts them at every step and the
-    message says so with the hint; the turn taken first, no step crosses."""
+def test_a_contour_folded_through_itself_is_said(monkeypatch):
+    """A hand onto another turned half round, the turn taken as straight node paths (as
+    before co-rotation): the shape passes through a flattened one whose segments cross;
+    the result counts them at every step and the message says so with the hint; the turn
+    taken first, no step crosses."""
+    import modalmorph.pipeline as pipeline
+
+    monkeypatch.setattr(pipeline, "CO_ROTATE", 360.0)
     a, b, pairs = _hands(0, 1, 100)
     r = morph(a, _rotate(b, np.pi), matching=pairs)
     assert_array_equal(r.self_intersections, [self_intersections(s) for s in r.shapes])
@@ -69,6 +73,36 @@ def test_a_contour_folded_through_itself_is_said():
     assert turn and int(turn[1]) > 150
     turned = morph(a, _rotate(b, np.pi), matching=pairs, remove_rigid=True)
     assert not np.any(turned.self_intersections) and "cross" not in turned.message
+
+
+@pytest.mark.parametrize("angle", [60, 120, 180])
+def test_a_large_turn_is_taken_as_a_rigid_motion_along_the_steps(angle):
+    """Pairs that turn the source by more than CO_ROTATE: the shapes turn with the steps
+    instead of shrinking through straight paths (a half turn passed through a point): they
+    keep their size, never cross, start at the source as given and end where the run of
+    the turned source ends; the energies are that run's (no similarity strains)."""
+    a, b, pairs = _hands(0, 1, 100)
+    target = _rotate(b, np.radians(angle), shift=(40.0, -25.0))
+    r = morph(a, target, matching=pairs)
+    first = morph(a, target, matching=pairs, remove_rigid=True)  # the turn taken first
+    assert r.co_rotation is not None and r.similarity is None
+    assert r.co_rotation.angle == pytest.approx(angle, abs=10)
+    assert_array_equal(r.shapes[0], a)
+    assert_array_equal(r.shapes[-1], first.shapes[-1])
+    assert_array_equal(r.energy, first.energy)
+    assert r.converged and not np.any(r.self_intersections)
+    size = np.array([_rms(s) for s in r.shapes])
+    assert size.min() >= 0.97 * min(size[0], size[-1])  # straight paths: 0.04-0.88
+    assert "taken as a rigid motion along the steps" in r.message
+    assert_allclose(r.mean_distance[-1], first.mean_distance[-1])
+    assert np.all(np.diff(r.mean_distance[1:]) <= 1e-9 * r.mean_distance[0])
+
+
+def test_a_small_turn_keeps_straight_paths():
+    """Pairs turning by less than CO_ROTATE morph as they always did: no co-rotation."""
+    a, b, pairs = _hands(0, 1, 100)
+    r = morph(a, _rotate(b, np.radians(10)), matching=pairs)
+    assert r.co_rotation is None and "rigid motion" not in r.message
 
 
 def test_result_fields_consistent():

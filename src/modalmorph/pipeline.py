@@ -25,6 +25,9 @@ docs/method.md:
 - ``model_nodes=400``: larger sources are modelled on 400 nodes spread over them and move
   with the element's field (in 3D its moving affine fit, which does not ripple between the
   model's nodes; method.md §7, "Reduced models in the dynamics").
+- pairs that turn the source by more than ``CO_ROTATE`` (30°): the turn is taken as a
+  rigid motion along the steps (:attr:`Morph.co_rotation`), not along straight node paths
+  that shrink a turning shape (method.md §4, "Large turns").
 - ``scheme="implicit"``: the spring enters the effective stiffness, unconditionally stable;
   ``"explicit"`` is the paper's (stable for small ``k`` only).
 - ``tol``: converged when :attr:`Morph.distance` (the stop test's measure, both ways for
@@ -35,7 +38,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -48,9 +51,17 @@ from .matching import Matching, match
 from .matching.contours import unpaired_sentence
 from .options import MatchOptions, MorphOptions, split_overrides
 from .simulation import SPARSE_MODES, Run, Simulation
+from .simulation.driver import mean_pair_distance
 from .threads import limit
 
-__all__ = ["Morph", "MorphDivergedError", "morph", "SPARSE_MODES"]
+__all__ = ["CO_ROTATE", "Morph", "MorphDivergedError", "co_rotated", "morph", "SPARSE_MODES"]
+
+# Pairs that turn the source by more than this many degrees are taken as a rigid turn
+# along the steps (Morph.co_rotation). Straight node paths shrink a turning shape: by
+# 1 - cos(angle / 2) of its size halfway (3.4 % at 30 deg, 29 % at 90), and a half turn
+# passes through a point (a hand: 0.98 of its size at 30 deg, 0.72 at 90, 0.04 at 180;
+# method.md §4, "Large turns").
+CO_ROTATE = 30.0
 
 log = logging.getLogger(__name__)
 
@@ -75,6 +86,11 @@ class Morph(Run):
         The options of the physical model and the time integration.
     match_options : MatchOptions or None
         The matcher's options (None for given pairs).
+    co_rotation : Similarity or None
+        Where the pairs turn the source by more than ``CO_ROTATE`` degrees (and
+        ``remove_rigid`` is off): their similarity, taken as a rigid motion along the steps
+        (:func:`co_rotated`) rather than as straight node paths, which pass through a
+        flattened shape; None otherwise.
     self_intersections : ndarray of int, shape (T+1,), or None
         For surfaces (a source with faces): the number of the surface's triangles that
         cut another of its triangles, at every step (:mod:`modalmorph.core.surfaces`;
@@ -91,6 +107,7 @@ class Morph(Run):
     options: MorphOptions
     match_options: MatchOptions | None = None
     self_intersections: np.ndarray | None = None
+    co_rotation: Similarity | None = None
 
     def shape(self, step: int = -1) -> Shape:
         """The shape at ``step`` (the last by default): the source's topology (contours,
@@ -159,19 +176,24 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
         if not given:
             matching = match(src, tgt, options=match_options)
         pairs = matching.pairs
-        similarity, work = None, src
+        similarity = turned = None
+        work = src
         if options.remove_rigid:  # section 5.2: Horn's similarity from the matched pairs
             similarity = align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]], scale=True)
             work = src.with_points(similarity.apply(src.points))
+        elif (turned := _large_turn(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]])):
+            work = src.with_points(turned.apply(src.points))
         sim = Simulation(work, tgt, pairs, options, matching.contours)
         run = sim.run(progress).result()
+        if turned is not None:  # the turn taken along the steps, in the source's frame
+            run = co_rotated(run, turned, src.points, tgt.points, sim.system.pairs)
     crossed = None
     if src.dim == 3 and src.has_faces:
         crossed = step_self_intersections(run.shapes, src.faces)
     elif src.dim == 2 and src.ordered:  # a contour folded through itself
         crossed = step_crossings(run.shapes, src)
     turn = None
-    if crossed is not None and np.any(crossed) and not options.remove_rigid:
+    if crossed is not None and np.any(crossed) and not options.remove_rigid and turned is None:
         turn = align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]], scale=True).angle
     said = intersection_sentence(crossed, model_nodes=run.resolved.model_nodes, nodes=src.m,
                                  turn=turn, contours=src.dim == 2)
@@ -179,10 +201,50 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
         said += _unpaired(src, tgt, sim.system.partners)
     if src.dim == 3 and not src.ordered and not run.converged:
         said += unlike_sentence(pairs, src.m, tgt.m)
+    if turned is not None:
+        said += (f"; the pairs' turn of {turned.angle:.0f} deg taken as a rigid motion along "
+                 f"the steps (co_rotation)")
     fields = {**vars(run), "message": run.message + said}
     return Morph(**fields, matching=matching, similarity=similarity, source=src,
                  target=tgt, options=options, match_options=match_options,
-                 self_intersections=crossed)
+                 self_intersections=crossed, co_rotation=turned)
+
+
+def _large_turn(a: np.ndarray, b: np.ndarray) -> Similarity | None:
+    """Horn's similarity of the pairs (``a`` onto ``b``) when it turns by more than
+    ``CO_ROTATE`` degrees, else None (also for pairs that fix none)."""
+    if len(a) <= a.shape[1]:
+        return None
+    try:
+        turn = align(a, b, scale=True)
+    except ShapeError:  # coincident source points: no turn to take
+        return None
+    return turn if turn.angle > CO_ROTATE else None
+
+
+def co_rotated(run: Run, turn: Similarity, source: np.ndarray, target: np.ndarray,
+               pairs: np.ndarray) -> Run:
+    """A run computed from the source turned by ``turn`` (its pairs' similarity) given in
+    the source's frame: step k's shape is taken back by the inverse turn and forward by
+    the part ``w_k`` of it (:meth:`Similarity.part`, about the source's centroid), ``w_k``
+    the share of the initial mean pair distance closed by step k (never decreasing, 1 at
+    the last step, whose shape stays as computed); loads turn with the shapes, mean
+    distances are measured anew; the energies are the deformation's, which no similarity
+    changes (method.md §4, "Large turns")."""
+    d = run.mean_distance
+    w = np.maximum.accumulate(np.clip(1.0 - d / d[0], 0.0, 1.0) if d[0] > 0 else
+                              np.ones_like(d))
+    w[0], w[-1] = 0.0, 1.0
+    back, centre = turn.inverse(), source.mean(axis=0)
+    shapes, loads = run.shapes.copy(), run.loads.copy()
+    distance = run.mean_distance.copy()
+    for k in range(len(shapes) - 1):
+        part = turn.part(w[k], centre)
+        shapes[k] = part.apply(back.apply(run.shapes[k]))
+        loads[k] = run.loads[k] @ (part.rotation @ back.rotation).T
+        distance[k] = mean_pair_distance(shapes[k], target, pairs)
+    shapes[0] = source  # exactly, not through the turn and back
+    return replace(run, shapes=shapes, loads=loads, mean_distance=distance)
 
 
 def _unpaired(src: Shape, tgt: Shape, partners: np.ndarray) -> str:

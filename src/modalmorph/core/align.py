@@ -97,6 +97,24 @@ class Similarity:
                              f"translation {self.translation} overflows float64")
         return Similarity(rotation=rt, scale=scale, translation=translation)
 
+    def part(self, w: float, centre) -> Similarity:
+        """The fraction ``w`` (0: the identity, 1: this similarity) of this similarity
+        about ``centre``: its turn by ``w`` of its angle about the same axis, its scale to
+        the power ``w``, ``centre`` moved ``w`` of the way to its image."""
+        c = np.asarray(centre, dtype=np.float64)
+        if self.dim == 2:
+            turn = w * np.arctan2(self.rotation[1, 0], self.rotation[0, 0])
+            rotation = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+        else:
+            from scipy.spatial.transform import Rotation
+
+            rotation = Rotation.from_rotvec(
+                w * Rotation.from_matrix(self.rotation).as_rotvec()).as_matrix()
+        scale = self.scale ** w
+        moved = c + w * (self.apply(c) - c)
+        return Similarity(rotation=rotation, scale=scale,
+                          translation=moved - scale * rotation @ c)
+
     @classmethod
     def identity(cls, dim: int) -> Similarity:
         return cls(rotation=np.eye(dim), scale=1.0, translation=np.zeros(dim))
