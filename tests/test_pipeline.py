@@ -98,6 +98,16 @@ def test_a_large_turn_is_taken_as_a_rigid_motion_along_the_steps(angle):
     assert np.all(np.diff(r.mean_distance[1:]) <= 1e-9 * r.mean_distance[0])
 
 
+def test_a_turn_alone_takes_one_step():
+    """A shape onto itself turned half round: the turned source is already there (the run
+    takes no step), and the turn still takes one: the last shape is the target."""
+    a = _hands(0, 1, 100)[0]
+    r = morph(a, _rotate(a, np.pi, shift=(5.0, 0.0)))
+    assert r.steps == 1 and r.converged and r.message.startswith("converged after 1 steps")
+    assert_array_equal(r.shapes[0], a)
+    assert_allclose(r.shapes[1], _rotate(a, np.pi, shift=(5.0, 0.0)), atol=1e-9)
+
+
 def test_a_small_turn_keeps_straight_paths():
     """Pairs turning by less than CO_ROTATE morph as they always did: no co-rotation."""
     a, b, pairs = _hands(0, 1, 100)

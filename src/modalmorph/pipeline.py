@@ -52,6 +52,7 @@ from .matching.contours import unpaired_sentence
 from .options import MatchOptions, MorphOptions, split_overrides
 from .simulation import SPARSE_MODES, Run, Simulation
 from .simulation.driver import mean_pair_distance
+from .simulation.result import stop_sentence
 from .threads import limit
 
 __all__ = ["CO_ROTATE", "Morph", "MorphDivergedError", "co_rotated", "morph", "SPARSE_MODES"]
@@ -186,7 +187,7 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
         sim = Simulation(work, tgt, pairs, options, matching.contours)
         run = sim.run(progress).result()
         if turned is not None:  # the turn taken along the steps, in the source's frame
-            run = co_rotated(run, turned, src.points, tgt.points, sim.system.pairs)
+            run = co_rotated(run, turned, src.points, tgt, sim.system.pairs)
     crossed = None
     if src.dim == 3 and src.has_faces:
         crossed = step_self_intersections(run.shapes, src.faces)
@@ -222,7 +223,7 @@ def _large_turn(a: np.ndarray, b: np.ndarray) -> Similarity | None:
     return turn if turn.angle > CO_ROTATE else None
 
 
-def co_rotated(run: Run, turn: Similarity, source: np.ndarray, target: np.ndarray,
+def co_rotated(run: Run, turn: Similarity, source: np.ndarray, target: Shape,
                pairs: np.ndarray) -> Run:
     """A run computed from the source turned by ``turn`` (its pairs' similarity) given in
     the source's frame: step k's shape is taken back by the inverse turn and forward by
@@ -230,7 +231,13 @@ def co_rotated(run: Run, turn: Similarity, source: np.ndarray, target: np.ndarra
     the share of the initial mean pair distance closed by step k (never decreasing, 1 at
     the last step, whose shape stays as computed); loads turn with the shapes, mean
     distances are measured anew; the energies are the deformation's, which no similarity
-    changes (method.md §4, "Large turns")."""
+    changes (method.md §4, "Large turns"). A run that starts within the tolerance takes
+    the turn in one step."""
+    if run.steps == 0:
+        unit = "input units" if target.frame is None else target.frame.unit
+        run = replace(run, **{f: np.repeat(getattr(run, f), 2, axis=0) for f in (
+            "shapes", "loads", "energy", "node_energy", "mean_distance")},
+            message=stop_sentence(run.stop_reason, 1, run.distance, run.tolerance, unit))
     d = run.mean_distance
     w = np.maximum.accumulate(np.clip(1.0 - d / d[0], 0.0, 1.0) if d[0] > 0 else
                               np.ones_like(d))
@@ -242,7 +249,7 @@ def co_rotated(run: Run, turn: Similarity, source: np.ndarray, target: np.ndarra
         part = turn.part(w[k], centre)
         shapes[k] = part.apply(back.apply(run.shapes[k]))
         loads[k] = run.loads[k] @ (part.rotation @ back.rotation).T
-        distance[k] = mean_pair_distance(shapes[k], target, pairs)
+        distance[k] = mean_pair_distance(shapes[k], target.points, pairs)
     shapes[0] = source  # exactly, not through the turn and back
     return replace(run, shapes=shapes, loads=loads, mean_distance=distance)
 
