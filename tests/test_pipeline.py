@@ -160,13 +160,17 @@ def test_two_thirds_of_modes_slower_and_less_accurate():
     assert part.mean_distance[-1] > full.mean_distance[-1]
 
 
-def test_removing_rigid_part_takes_fewer_steps():
+@pytest.mark.parametrize("angle", [0.4, 0.8])  # 23 deg: straight paths; 46: co-rotated
+def test_removing_rigid_part_takes_fewer_steps(angle):
     a, b, pairs = _hands(0, 3, 100)
-    moved = _rotate(b, 0.8, scale=1.3, shift=(50, -20))
+    moved = _rotate(b, angle, scale=1.3, shift=(50, -20))
     plain = morph(a, moved, matching=pairs)
     rigid = morph(a, moved, matching=pairs, remove_rigid=True)
-    assert rigid.similarity is not None
-    assert rigid.steps < plain.steps and rigid.converged
+    assert rigid.similarity is not None and rigid.converged
+    if plain.co_rotation is None:
+        assert rigid.steps < plain.steps
+    else:  # the same run, shown in the source's frame
+        assert rigid.steps == plain.steps
 
 
 def test_numerical_damping_with_delta():
