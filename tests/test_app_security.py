@@ -182,6 +182,28 @@ def test_nifti_declaring_a_huge_volume_is_refused_from_its_header(server, name):
     assert status == 200, answer
 
 
+@pytest.mark.parametrize("kind", ["nifti2", "big-endian"])
+def test_check_nifti_reads_nifti2_and_big_endian_headers(tmp_path, kind):
+    """The header bound reads a NIfTI-2 header (540 bytes, 64-bit dims) and a big-endian
+    NIfTI-1 one as nibabel writes them: the shape they declare, and LimitError over the
+    bound, from the header alone."""
+    nib = pytest.importorskip("nibabel")
+    from modalmorph.io.limits import LimitError, Limits, check_nifti
+
+    def header(shape):
+        h = nib.Nifti2Header() if kind == "nifti2" else nib.Nifti1Header().as_byteswapped(">")
+        h.set_data_shape(shape)
+        h.set_data_dtype(np.float32)
+        return h.binaryblock + b"\0" * 4
+
+    path = tmp_path / "x.nii"
+    path.write_bytes(header((30, 20, 10)))
+    assert check_nifti(path) == (30, 20, 10)
+    path.write_bytes(header((3000, 2000, 1000)))  # 24 GB of float32 voxels
+    with pytest.raises(LimitError, match="4 bytes a voxel"):
+        check_nifti(path, Limits(max_array_bytes=10**9))
+
+
 def test_npy_declaring_a_huge_array_is_refused(server):
     header = io.BytesIO()
     np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False,
