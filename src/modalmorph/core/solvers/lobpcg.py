@@ -19,10 +19,13 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from scipy import linalg
+from scipy.linalg import blas
 
 __all__ = ["lobpcg", "Rows", "rayleigh_ritz"]
 
 logger = logging.getLogger(__name__)
+
+_dgemm = blas.dgemm
 
 # Stalled: the residual fell by less than _STALL_FACTOR over this many iterations (method.md §7).
 _STALL_WINDOW = 10
@@ -46,33 +49,40 @@ def rayleigh_ritz(A: np.ndarray, B: np.ndarray, k: int):
 
 class Rows:
     """Dense operations on tall blocks (N, c), a chunk of ``_ROWS`` rows at a time and the
-    chunks spread over the threads: no temporary of a block's full size."""
+    chunks spread over the threads: no temporary of a block's full size, and the chunks'
+    temporaries in buffers of each thread made once (a fresh 2 MB temporary per chunk
+    costs its page faults: the Ritz update of three blocks of 300 000 x 62, one thread,
+    593-795 ms with fresh temporaries and the columns copied, 525-531 ms with these)."""
 
     def __init__(self, pool: ThreadPoolExecutor, threads: int, N: int):
         self.pool, self.threads = pool, threads
         self.chunks = [slice(s, min(s + _ROWS, N)) for s in range(0, N, _ROWS)]
+        self.scratch = [_Scratch(_ROWS) for _ in range(threads)]
 
     def map(self, fn):
-        """``[fn(rows) for rows in the chunks]`` summed per thread: one result per
-        thread."""
+        """``[fn(rows, tmp) for rows in the chunks]`` summed per thread: one result per
+        thread; ``tmp(name, c)`` is a (rows, c) buffer of the thread's."""
         def work(t):
-            out = None
+            out, scratch = None, self.scratch[t]
             for rows in self.chunks[t::self.threads]:
-                v = fn(rows)
-                out = v if out is None else out + v
+                v = fn(rows, lambda name, c, n=rows.stop - rows.start: scratch(name, c, n))
+                if v is not None:
+                    out = v if out is None else out + v
             return out
 
         return [v for v in self.pool.map(work, range(self.threads)) if v is not None]
 
     def inner(self, S: list, T: list, symmetric: bool = False) -> np.ndarray:
         """The block matrix ``[[a.T @ b for b in T] for a in S]``; with ``symmetric``
-        (``S[i].T @ T[j] = (S[j].T @ T[i]).T``) only the blocks ``j >= i`` are computed."""
-        def part(rows):
+        (``S[i].T @ T[j] = (S[j].T @ T[i]).T``) only the blocks ``j >= i`` are computed.
+        An entry of ``S`` may be a pair ``(array, columns)``: those columns of it."""
+        def part(rows, tmp):
             blocks = [[None] * len(T) for _ in S]
             for i, a in enumerate(S):
+                a = _take(a, rows, tmp)
                 for j, b in enumerate(T):
                     if not symmetric or j >= i:
-                        blocks[i][j] = _take(a, rows).T @ b[rows]
+                        blocks[i][j] = a.T @ b[rows]
             for i in range(len(S)):
                 for j in range(i if symmetric else 0):
                     blocks[i][j] = blocks[j][i].T
@@ -84,50 +94,45 @@ class Rows:
         """``(R, res)`` in one pass: the residuals ``R = K X - M X diag(w2)`` (into ``R``)
         and their relative norms ``||R|| / (|w2| ||M X||)``, column by column."""
 
-        def part(rows):
-            R[rows] = KX[rows] - MX[rows] * w2
-            return np.stack([np.einsum("ij,ij->j", R[rows], R[rows]),
+        def part(rows, tmp):
+            r = R[rows]
+            np.multiply(MX[rows], w2, out=r)
+            np.subtract(KX[rows], r, out=r)
+            return np.stack([np.einsum("ij,ij->j", r, r),
                              np.einsum("ij,ij->j", MX[rows], MX[rows])])
 
         r2, m2 = np.sqrt(sum(self.map(part)))
         return R, r2 / (np.abs(w2) * m2)
 
-    def each(self, fn) -> None:
-        """``fn(rows)`` for every chunk."""
-        def part(rows):
-            fn(rows)
-            return None
+    def times(self, Y: np.ndarray, C: np.ndarray) -> None:
+        """``Y <- Y C`` in place (C square)."""
+        def part(rows, tmp):
+            Y[rows] = np.matmul(Y[rows], C, out=tmp("q", C.shape[1]))
 
         self.map(part)
 
-    def times(self, Y: np.ndarray, C: np.ndarray) -> None:
-        """``Y <- Y C`` in place (C square)."""
-        def part(rows):
-            Y[rows] = Y[rows] @ C
-
-        self.each(part)
-
     def subtract(self, W: np.ndarray, X: np.ndarray, H: np.ndarray) -> None:
         """``W <- W - X H`` in place."""
-        def part(rows):
-            W[rows] -= X[rows] @ H
+        def part(rows, tmp):
+            _gemm_into(W[rows], X[rows], H, -1.0)
 
-        self.each(part)
+        self.map(part)
 
     def ritz_update(self, blocks, Cx: np.ndarray, Cw: np.ndarray,
                     Cp: np.ndarray | None, cols=slice(None)) -> None:
         """For each ``(Y, Z, Q)`` of ``blocks``, in place: ``Q <- Z Cw + Q[:, cols] Cp``
         (left out when ``Cp`` is None) and then ``Y <- Y Cx + Q``."""
-        def part(rows):
-            for Y, Z, Q in blocks:
-                q = Z[rows] @ Cw
-                if Cp is not None:
-                    q += Q[rows][:, cols] @ Cp
-                Q[rows] = q
-                q += Y[rows] @ Cx
-                Y[rows] = q
+        k = Cx.shape[1]
 
-        self.each(part)
+        def part(rows, tmp):
+            for Y, Z, Q in blocks:
+                q = np.matmul(Z[rows], Cw, out=tmp("q", k))
+                if Cp is not None:
+                    _gemm_into(q, _take((Q, cols), rows, tmp), Cp)
+                Q[rows] = q
+                Y[rows] = _gemm_into(q, Y[rows], Cx)
+
+        self.map(part)
 
 
 def lobpcg(ops, precondition, V, n, tol, maxiter, rows, clock):
@@ -150,7 +155,7 @@ def lobpcg(ops, precondition, V, n, tol, maxiter, rows, clock):
         rows.times(Y, C)
     known = _carried(A, B, C, 0)
     P = KP = MP = None
-    scratch = _Scratch(len(X), k)
+    scratch = _Scratch(len(X))
     best = []  # the lowest largest wanted residual so far, per iteration
     for it in range(maxiter + 1):
         # relative residuals ||K x - w2 M x|| / (w2 ||M x||)
@@ -167,11 +172,12 @@ def lobpcg(ops, precondition, V, n, tol, maxiter, rows, clock):
         # soft locking: new directions only for the columns not yet converged
         active = np.flatnonzero(res > tol)
         a = len(active)
-        W = precondition(R, active if a < k else slice(None), scratch("W", a))
+        cols = active if a < k else slice(None)  # a slice: no copies of the columns
+        W = precondition(R, cols, scratch("W", a))
         rows.subtract(W, X, rows.inner([MX], [W]))  # M-orthogonal to the Ritz vectors
         KW, MW = K(W, scratch("KW", a)), apply_m(W, scratch("MW", a))
         # and the directions P of those columns only (those of the others left out)
-        S = [X] if P is None else [X, (P, active)]
+        S = [X] if P is None else [X, (P, cols)]
         if P is not None:
             idx = np.r_[np.arange(k), k + active]
             known = tuple(G[np.ix_(idx, idx)] for G in known)
@@ -186,29 +192,46 @@ def lobpcg(ops, precondition, V, n, tol, maxiter, rows, clock):
         if P is None:
             P, KP, MP = (np.empty_like(X) for _ in range(3))
         # P <- W Cw + P Cp, X <- X Cx + P: in place, a chunk of rows at a time
-        rows.ritz_update(((X, W, P), (KX, KW, KP), (MX, MW, MP)), Cx, Cw, Cp, active)
+        rows.ritz_update(((X, W, P), (KX, KW, KP), (MX, MW, MP)), Cx, Cw, Cp, cols)
         del W, KW, MW
     raise AssertionError("unreachable")
 
 
 class _Scratch:
-    """Tall work blocks reused from one iteration to the next: ``scratch(name, c)`` is a
-    contiguous (N, c) view of a buffer of N * k doubles made once (a block of 150 MB made
-    afresh costs its page faults every time: 18-84 ms against 10-21 ms to fill a reused
-    one, measured at 100 000 nodes)."""
+    """Work blocks reused from one iteration to the next: ``scratch(name, c, n)`` is a
+    contiguous (n, c) view of a buffer of ``rows * c`` doubles or more, made once per name
+    (made again when a wider one is asked for); ``n`` defaults to ``rows``. At 100 000
+    nodes a block of 150 MB made afresh costs its page faults every time: 18-84 ms against
+    10-21 ms to fill a reused one."""
 
-    def __init__(self, N: int, k: int):
-        self.N, self.k, self.buffers = N, k, {}
+    def __init__(self, rows: int):
+        self.rows, self.buffers = rows, {}
 
-    def __call__(self, name: str, c: int) -> np.ndarray:
-        if name not in self.buffers:
-            self.buffers[name] = np.empty(self.N * self.k)
-        return self.buffers[name][:self.N * c].reshape(self.N, c)
+    def __call__(self, name: str, c: int, n: int | None = None) -> np.ndarray:
+        n = self.rows if n is None else n
+        if name not in self.buffers or len(self.buffers[name]) < n * c:
+            self.buffers[name] = np.empty(self.rows * c)
+        return self.buffers[name][:n * c].reshape(n, c)
 
 
-def _take(a, rows):
-    """``a[rows]``, or ``a[0][rows][:, a[1]]`` for a pair (array, columns)."""
-    return a[0][rows][:, a[1]] if isinstance(a, tuple) else a[rows]
+def _take(a, rows, tmp):
+    """``a[rows]``, or for a pair ``(array, columns)`` those columns of ``array[rows]``
+    (into the thread's buffer ``tmp`` when ``columns`` is not a slice)."""
+    if not isinstance(a, tuple):
+        return a[rows]
+    a, cols = a
+    if isinstance(cols, slice):
+        return a[rows][:, cols]
+    return np.take(a[rows], cols, axis=1, out=tmp("take", len(cols)))
+
+
+def _gemm_into(C: np.ndarray, A: np.ndarray, B: np.ndarray, alpha: float = 1.0):
+    """``C <- C + alpha A B`` in place, no temporary (BLAS's ``dgemm`` with ``beta = 1``
+    on the transposes; C is C-contiguous)."""
+    out = _dgemm(alpha, B, A.T, beta=1.0, c=C.T, trans_a=1, overwrite_c=1)
+    if not np.shares_memory(out, C):  # copied by f2py after all
+        C[...] = out.T
+    return C
 
 
 def _bordered(G: np.ndarray, H: np.ndarray) -> np.ndarray:

@@ -66,6 +66,7 @@ from scipy.spatial import cKDTree
 
 from ...errors import ModelError
 from ..element import (
+    gaussian,
     gaussian_from_overlap,
     singular_gram,
     stiffness_component_pairs,
@@ -100,8 +101,10 @@ _PATCH_BATCH = 256
 # blocks of 6250 rows take 536 ms (K_g) against 582 in one block, one thread (the
 # products' results stay small and are reused instead of mapped afresh).
 _SPARSE_ROWS = 8192
-# Points per chunk of the coarse modes' fields at the fine nodes.
-_FIELD_CHUNK = 16384
+# Points per chunk of the coarse modes' fields at the fine nodes (consecutive in the
+# solver's order, so close together: 256 of 100 000 random ellipsoid points meet 348 of
+# 1000 coarse nodes on average; 0.40 s for all, 1024 points per chunk 0.59 s).
+_FIELD_CHUNK = 256
 # Threads of the sparse and dense block products (2 cores; results equal to round-off).
 THREADS = 2
 
@@ -220,19 +223,38 @@ def _blas_single_threaded() -> bool:
 
 
 def _coarse_fields(cmodel, cmodes, points: np.ndarray, pool: ThreadPoolExecutor):
-    """``cmodel.modes_at(cmodes, points)``, chunks of points spread over the threads."""
-    d, p = cmodel.dim, len(points)
-    psi = cmodes.gaussian.reshape(d, cmodel.m, -1)
-    V = np.empty((d, p, psi.shape[2]))
+    """``cmodel.modes_at(cmodes, points)`` (component-major, (d * p, n)) for points in the
+    solver's order (a chunk of consecutive ones lies close together): per chunk of
+    ``_FIELD_CHUNK`` points, the element's field ``g_k(x_p)`` (zero beyond the cutoff
+    radius, as :meth:`FEModel.field`) as a dense block over the coarse nodes within the
+    cutoff of the chunk, times the modes of those nodes, every component in one product
+    (100 000 points, 1000 coarse nodes, 62 modes: 0.4 s against 2.1 s through the sparse
+    field of a k-d tree's distance matrix, one thread)."""
+    d, p, m = cmodel.dim, len(points), cmodel.m
+    k = cmodes.gaussian.shape[1]
+    psi = cmodes.gaussian.reshape(d, m, k).transpose(1, 0, 2).reshape(m, d * k)
+    nodes, reach = cmodel.points, cmodel.cutoff_radius
+    tree = cKDTree(nodes)
+    V = np.empty((d, p, k))
 
     def work(s):
-        g = cmodel.field(points[s:s + _FIELD_CHUNK])
-        for a in range(d):
-            V[a, s:s + _FIELD_CHUNK] = g @ psi[a]
+        x = points[s:s + _FIELD_CHUNK]
+        centre = x.mean(axis=0)
+        near = np.sort(tree.query_ball_point(
+            centre, np.sqrt(np.max(np.sum((x - centre) ** 2, axis=1))) + reach))
+        y = nodes[near]
+        r2 = (x[:, :1] - y[:, 0]) ** 2
+        for a in range(1, d):
+            r2 += (x[:, a:a + 1] - y[:, a]) ** 2
+        g = np.where(r2 <= reach ** 2, gaussian(r2, cmodel.width), 0.0)
+        if not np.all(np.any(g > 0, axis=1)):
+            raise ModelError("a node lies beyond the cutoff radius of every node of the "
+                             "multilevel solver's coarse model: use more coarse_nodes")
+        V[:, s:s + len(x)] = (g @ psi[near]).reshape(len(x), d, k).transpose(1, 0, 2)
 
     for _ in pool.map(work, range(0, p, _FIELD_CHUNK)):
         pass
-    return V.reshape(d * p, -1)
+    return V.reshape(d * p, k)
 
 
 class _Clock:
