@@ -135,6 +135,18 @@ _STRETCH_GAIN = 0.5
 # landings: subsets of 1000-4000 nodes 0.98-1.02 (180 deg wrong), 10 000 0.99/0.97/0.96
 # (median 0.84/0.93/0.87 spacings, main 0.85/1.11/1.22; 15.0-15.3 CPU-s, main 15.0-15.7).
 CHOICE_NODES = 10_000
+# Above CHOICE_NODES source nodes, refine's first level (of the subsets' starts and of the
+# refinement after) shrinks the landings' departure from their best affine map by this
+# fraction every round (clouds.refine's decay): a smooth field holds a turn as well as the
+# pose does, and on two independent samplings nothing else pulls it back (blob, 100 000
+# points, benchmarks/match3d.py --variants resampled: the landings' best similarity
+# 1.3 deg from the truth's at 0 deg). Median pair error in target spacings, 0 / 30 / 90 /
+# 180 deg, none -> 0.02: blob resampled 2.83 / 2.39 / 2.23 / 2.45 -> 1.88 / 2.21 / 2.27 /
+# 2.13; bunny resampled 1.22 / 1.09 / 1.15 / 1.12 -> 1.21 / 1.06 / 1.16 / 1.11; base (the
+# target the source's points moved) blob 0.98 / 0.87 -> 0.96 / 0.90 at 0 / 180, bunny
+# 0.84 both. At 0 deg 0.01 / 0.05: 2.03 / 2.41; 0.02 at every level: 2.00; the subsets' or
+# the refinement's first level alone: 2.00 / 2.14.
+POSE_DECAY = 0.02
 _REJECT = 16.0  # pairs costing more are dropped: 4 target spacings (not measured)
 
 
@@ -337,7 +349,8 @@ def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndar
     ``z`` as it is, or its best similarity alone, without the deformation the coarse
     match gave it (carried from coarse nodes, that can hold the refinement away from the
     truth: blob, 100 000 points, 90 deg). Above ``CHOICE_NODES`` source nodes both are
-    tried on even subsets of both objects."""
+    tried on even subsets of both objects, and the first levels keep the deformation
+    from taking the pose (``POSE_DECAY``)."""
     i, j = np.arange(len(x)), np.arange(len(y))
     if len(x) > CHOICE_NODES:  # as wide cubes: an even subset's spacing grows as its count falls
         i = even_subset(x, CHOICE_NODES)
@@ -347,12 +360,13 @@ def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndar
     starts, yj = (z, align(x, z).apply(x)), y[j]
     tree = cKDTree(yj)
     trim = _GAP_TRIM * tree.query(yj, k=2)[0][:, 1].mean()
-    firsts = [refine(x[i], s[i], yj, start, levels=1) for s in starts]
+    decay = POSE_DECAY if len(x) > CHOICE_NODES else 0.0
+    firsts = [refine(x[i], s[i], yj, start, levels=1, decay=decay) for s in starts]
     best = int(np.argmin([surface_gap(f, yj, trim, tree=tree) for f in firsts]))
     z = firsts[best]
     if len(i) < len(x):  # the subset's first level carried to every node
         z = starts[best] + _carried(x[i], z - starts[best][i], x, 1.0)
-    return refine(x, z, y, finer(start, 1))  # from its second level on
+    return refine(x, z, y, finer(start, 1), decay=decay)  # from its second level on
 
 
 def _coarse_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
