@@ -38,16 +38,15 @@ average (1 minute) when the case ended: on a shared machine wall time grows with
 Variants (``--variants``,
 :data:`VARIANTS`): ``base`` as above; ``warp5`` and ``warp25`` a warp of exactly 5 % and
 25 % of the size; ``cut``, 20 % of the target cut away as one cap instead of at random;
-``resampled``, the target's points
-sampled anew on the same surface, evenly as the source (as many, area-weighted on a
-mesh's faces, with the generator's next draws), then warped, turned, noised and 80 % kept
-as in ``base``: two scans of one surface share no samples, and in every variant but this
-one and ``uneven`` a route can find each source point's own moved copy. Its best (the
-median distance from the truth to the nearest of independent random target points) is
-then 0.82-0.95 spacings (measured at 2000-1 000 000 points; for uniform random points in
-a plane sqrt(ln 2 / pi) / (1/2) = 0.94 of their mean nearest-neighbour spacing), so no
-pairing gets much under 1 spacing there (``twisted`` is a lattice, the same points
-again: there it is ``base``);
+``resampled``, the target's points sampled anew on the same surface, evenly as the source
+(as many, area-weighted on a mesh's faces, with the generator's next draws), then warped,
+turned, noised and 80 % kept as in ``base``: two scans of one surface share no samples,
+and in every variant but this one and ``uneven`` a route can find each source point's own
+moved copy. Its best (the median distance from the truth to the nearest of independent
+random target points) is then 0.82-0.95 spacings (measured at 2000-1 000 000 points; for
+uniform random points in a plane sqrt(ln 2 / pi) / (1/2) = 0.94 of their mean nearest-
+neighbour spacing), so no pairing gets much under 1 spacing there (``twisted`` is a
+lattice, the same points again: there it is ``base``);
 ``uneven``, the target sampled anew with a density growing 20 times across it, as a
 scanner sees a surface (errors then include the distance from the true position to the
 nearest target sample); ``all``, every target point kept.
