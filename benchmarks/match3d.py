@@ -44,8 +44,8 @@ turned, noised and 80 % kept as in ``base``: two scans of one surface share no s
 and in every variant but this one and ``uneven`` a route can find each source point's own
 moved copy. Its best (the median distance from the truth to the nearest of independent
 random target points) is then 0.82-0.95 spacings (measured at 2000-1 000 000 points; for
-uniform random points in a plane sqrt(ln 2 / pi) / (1/2) = 0.94 of their mean nearest-
-neighbour spacing), so no pairing gets much under 1 spacing there (``twisted`` is a
+uniform random points in a plane sqrt(ln 2 / pi) / (1/2) = 0.94 of their mean
+nearest-neighbour spacing), so no pairing gets much under 1 spacing there (``twisted`` is a
 lattice, the same points again: there it is ``base``);
 ``uneven``, the target sampled anew with a density growing 20 times across it, as a
 scanner sees a surface (errors then include the distance from the true position to the
