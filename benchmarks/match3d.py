@@ -38,9 +38,18 @@ average (1 minute) when the case ended: on a shared machine wall time grows with
 Variants (``--variants``,
 :data:`VARIANTS`): ``base`` as above; ``warp5`` and ``warp25`` a warp of exactly 5 % and
 25 % of the size; ``cut``, 20 % of the target cut away as one cap instead of at random;
+``resampled``, the target's points sampled anew on the same surface, evenly as the source
+(as many, area-weighted on a mesh's faces, with the generator's next draws), then warped,
+turned, noised and 80 % kept as in ``base``: two scans of one surface share no samples,
+and in every variant but this one and ``uneven`` a route can find each source point's own
+moved copy. Its best (the median distance from the truth to the nearest of independent
+random target points) is then 0.82-0.95 spacings (measured at 2000-1 000 000 points; for
+uniform random points in a plane sqrt(ln 2 / pi) / (1/2) = 0.94 of their mean
+nearest-neighbour spacing), so no pairing gets much under 1 spacing there (``twisted`` is a
+lattice, the same points again: there it is ``base``);
 ``uneven``, the target sampled anew with a density growing 20 times across it, as a
 scanner sees a surface (errors then include the distance from the true position to the
-nearest target sample, up to about half a spacing); ``all``, every target point kept.
+nearest target sample); ``all``, every target point kept.
 
 Peers (``--methods``, :data:`PEERS`): ``cpd``, pycpd's deformable CPD; ``bcpd``,
 probreg's Python BCPD (:func:`run_bcpd`; the issue's BCPD++ is a C program that no
@@ -226,7 +235,8 @@ def make_case(shape: str, m: int, angle: float, noise: float, seed: int = 0, *,
     ``overlap``: ``"random"`` keeps a random fraction ``keep`` of the target's points,
     ``"cut"`` cuts away the rest as one cap (the points farthest along a random
     direction); ``sampling``: ``"even"`` samples the target at the source's points,
-    ``"uneven"`` samples it anew, unevenly (:func:`uneven`)."""
+    ``"resampled"`` samples it anew as the source is sampled (:func:`sample`, the same
+    density, the generator's next draws), ``"uneven"`` anew, unevenly (:func:`uneven`)."""
     rng = np.random.default_rng([seed, m, int(angle)])
     src = sample(shape, m, rng)
     size = np.sqrt(np.mean(np.sum((src - src.mean(axis=0)) ** 2, axis=1)))
@@ -243,8 +253,8 @@ def make_case(shape: str, m: int, angle: float, noise: float, seed: int = 0, *,
 
     truth = move(src)
     tgt = truth + noise * size * rng.normal(size=truth.shape)
-    if sampling == "uneven":
-        q = uneven(shape, m, rng)
+    if sampling != "even":  # sampled anew: evenly as the source, or unevenly
+        q = (uneven if sampling == "uneven" else sample)(shape, m, rng)
         tgt = move(q) + noise * size * rng.normal(size=q.shape)
     n = int(round(keep * len(tgt)))
     if overlap == "cut":
@@ -316,6 +326,7 @@ VARIANTS = {
     "warp5": {"span": (0.05, 0.05)},
     "warp25": {"span": (0.25, 0.25)},
     "cut": {"overlap": "cut"},
+    "resampled": {"sampling": "resampled"},
     "uneven": {"sampling": "uneven"},
     "all": {"keep": 1.0},
 }

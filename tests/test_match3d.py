@@ -99,6 +99,50 @@ def test_refine_first_level_recovers_a_turned_pose():
     assert np.array_equal(refine(x, start, y, 250, levels=99), refine(x, start, y, 250))
 
 
+def sampled_anew(m, angle, seed=0):
+    """As :func:`case`, but the target's points sampled anew on the blob (as two scans of
+    one surface share no samples) before the same warp and turn: source, target, truth."""
+    rng = np.random.default_rng(seed)
+    src, again = blob(m, rng), blob(m, rng)
+    bumps, dirs = src[rng.choice(m, 4, replace=False)], rng.normal(size=(4, 3))
+
+    def field(p):
+        return sum(np.exp(-np.sum((p - c) ** 2, axis=1) / (2 * 0.4**2))[:, None] * v
+                   for c, v in zip(bumps, dirs, strict=True))
+
+    scale = 0.1 * 0.6 / np.linalg.norm(field(src), axis=1).max()
+    rot = Rotation.from_rotvec(np.deg2rad(angle) * np.array([0.3, -0.5, 0.8]) / np.sqrt(0.98))
+
+    def move(p):
+        return rot.apply(p + scale * field(p)) + [0.2, -0.1, 0.3]
+
+    tgt = move(again) + 0.01 * 0.6 * rng.normal(size=again.shape)
+    return src, tgt[rng.permutation(m)[: int(0.8 * m)]], move(src)
+
+
+def test_refine_decay_gives_the_turn_back_to_the_pose():
+    """On two independent samplings the first level's smooth field keeps part of a turn
+    the pose should take; shrinking its departure from the best affine map every round
+    (``decay``, matching.POSE_DECAY) leaves the landings nearer the true pose (from 4
+    degrees off: measured 2.30 -> 2.11 degrees; with the target the source's own points,
+    test above, 0.11); decay 0 is the refinement as it was, bit for bit."""
+    src, tgt, truth = sampled_anew(20000, 30)
+    s, t = mm.Shape(src), mm.Shape(tgt)
+    x, y, z = s.normalized, t.normalized, t.to_normalized(truth)
+    turn = Rotation.from_rotvec(np.deg2rad(4.0) * np.array([1.0, 2.0, -1.0]) / np.sqrt(6))
+    centre = z.mean(axis=0)
+    start = turn.apply(mm.align(x, z).apply(x) - centre) + centre
+    true = mm.align(x, z).rotation
+
+    def off(decay):
+        one = refine(x, start, y, 250, levels=1, decay=decay)
+        return np.degrees(Rotation.from_matrix(mm.align(x, one).rotation @ true.T).magnitude())
+
+    assert off(0.02) <= off(0.0) - 0.1  # measured 2.11 and 2.30
+    assert np.array_equal(refine(x[:3000], start[:3000], y, 250, levels=1, decay=0.0),
+                          refine(x[:3000], start[:3000], y, 250, levels=1))
+
+
 def test_huge_sets_matched_on_subsets(monkeypatch):
     """Above FINE_CLOUD nodes the match runs on even subsets and carries every node (here
     FINE_CLOUD lowered to 2000 so that 6000 points take that route): every source node

@@ -106,6 +106,13 @@ FINE_PASSES = 5
 # the blob's subset at 0 deg 4.12 / 3.51 / 2.95 / -, 90 deg - / 3.65 / 3.27 / 3.75, 180 deg
 # - / 4.70 / 4.19 / 4.53; the bunny's at 30 deg 1.87 / 1.39 / 2.09 / -. 16 at the first
 # level: its field no longer turns (blob 0 deg: 2.2 deg off after 4 passes).
+# Above CHOICE_NODES, _refined smooths refine's levels from the third as wide: on two
+# independent samplings (benchmarks/match3d.py --variants resampled, 100 000 points, 0 /
+# 30 / 90 / 180 deg, with POSE_DECAY; median pair error in target spacings) blob 1.88 /
+# 2.32 / 2.26 / 2.30 -> 1.77 / 2.12 / 1.85 / 2.06, bunny 1.20 / 1.07 / 1.14 / 1.11 ->
+# 1.08 / 0.97 / 1.02 / 1.07 (the finer transports, 2.6-1 spacings wide, pulled by the
+# samplings' chance clumps: blob 0 deg 1.98 -> 2.16 after the first level); base blob
+# 0.96 / 0.84 / 0.94 / 0.91 -> 0.96 / 0.86 / 0.95 / 0.93, bunny 0.84 -> 0.85.
 HUGE_SMOOTHING = 16.0
 _SMOOTHING = {1: 8.0, 2: HUGE_SMOOTHING}  # per level of the passes
 # refine() of a 3D point set up to FINE_CLOUD nodes starts this many times coarser than
@@ -135,6 +142,19 @@ _STRETCH_GAIN = 0.5
 # landings: subsets of 1000-4000 nodes 0.98-1.02 (180 deg wrong), 10 000 0.99/0.97/0.96
 # (median 0.84/0.93/0.87 spacings, main 0.85/1.11/1.22; 15.0-15.3 CPU-s, main 15.0-15.7).
 CHOICE_NODES = 10_000
+# Above CHOICE_NODES source nodes, refine's first level (of the subsets' starts and of the
+# refinement after) shrinks the landings' departure from their best affine map by this
+# fraction every round (clouds.refine's decay): a smooth field holds a turn as well as the
+# pose does, and on two independent samplings nothing else pulls it back (blob, 100 000
+# points, benchmarks/match3d.py --variants resampled: the landings' best similarity
+# 1.3 deg from the truth's at 0 deg). Median pair error in target spacings, 0 / 30 / 90 /
+# 180 deg, none -> 0.02: blob resampled 2.83 / 2.39 / 2.23 / 2.45 -> 1.88 / 2.32 / 2.26 /
+# 2.30; bunny resampled 1.22 / 1.09 / 1.15 / 1.12 -> 1.20 / 1.07 / 1.14 / 1.11; base (the
+# target the source's points moved) blob 0.98 / 0.84 / 0.93 / 0.87 -> 0.96 / 0.84 / 0.94 /
+# 0.91, bunny 0.83-0.84 unchanged; same CPU time. The similarity as its target, at 0 deg:
+# 0.01 / 0.02 / 0.05: 2.03 / 1.88 / 2.41; at
+# every level: 2.00; the subsets' or the refinement's first level alone: 2.00 / 2.14.
+POSE_DECAY = 0.02
 _REJECT = 16.0  # pairs costing more are dropped: 4 target spacings (not measured)
 
 
@@ -337,7 +357,9 @@ def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndar
     ``z`` as it is, or its best similarity alone, without the deformation the coarse
     match gave it (carried from coarse nodes, that can hold the refinement away from the
     truth: blob, 100 000 points, 90 deg). Above ``CHOICE_NODES`` source nodes both are
-    tried on even subsets of both objects."""
+    tried on even subsets of both objects, the first levels keep the deformation from
+    taking the pose (``POSE_DECAY``), and the levels from the third are smoothed
+    ``HUGE_SMOOTHING`` cube widths wide."""
     i, j = np.arange(len(x)), np.arange(len(y))
     if len(x) > CHOICE_NODES:  # as wide cubes: an even subset's spacing grows as its count falls
         i = even_subset(x, CHOICE_NODES)
@@ -347,12 +369,17 @@ def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndar
     starts, yj = (z, align(x, z).apply(x)), y[j]
     tree = cKDTree(yj)
     trim = _GAP_TRIM * tree.query(yj, k=2)[0][:, 1].mean()
-    firsts = [refine(x[i], s[i], yj, start, levels=1) for s in starts]
+    large = len(x) > CHOICE_NODES
+    decay = POSE_DECAY if large else 0.0
+    firsts = [refine(x[i], s[i], yj, start, levels=1, decay=decay) for s in starts]
     best = int(np.argmin([surface_gap(f, yj, trim, tree=tree) for f in firsts]))
     z = firsts[best]
     if len(i) < len(x):  # the subset's first level carried to every node
         z = starts[best] + _carried(x[i], z - starts[best][i], x, 1.0)
-    return refine(x, z, y, finer(start, 1))  # from its second level on
+    if not large or cube_levels(len(y), finer(start, 1)) < 2:
+        return refine(x, z, y, finer(start, 1))  # from its second level on
+    z = refine(x, z, y, finer(start, 1), levels=1, decay=decay)  # its second level
+    return refine(x, z, y, finer(start, 2), smoothing=HUGE_SMOOTHING)  # the finer, stiffer
 
 
 def _coarse_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions

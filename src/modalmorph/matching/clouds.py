@@ -204,7 +204,8 @@ def _transport(z: np.ndarray, mu: np.ndarray, y: np.ndarray, nu: np.ndarray,
 
 
 def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
-           levels: int | None = None, smoothing: float = _WIDTH) -> np.ndarray:
+           levels: int | None = None, smoothing: float = _WIDTH, decay: float = 0.0
+           ) -> np.ndarray:
     """Where the source lands on the target, refined coarse to fine.
 
     The first level summarises the target in cubes of about ``4 * start`` node counts'
@@ -233,6 +234,11 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
     smoothing : float, optional
         Width of the Gaussian smoothing of the moves, in the level's cube widths
         (``_WIDTH`` by default).
+    decay : float, optional
+        Fraction by which, every round of the first level, the landings' departure from
+        their best affine map (:func:`_affine`) shrinks (0, the default: none): the
+        affine map takes the pose instead of a smooth field that can hold a turn as
+        well (:mod:`modalmorph.matching`, ``POSE_DECAY``).
 
     Returns
     -------
@@ -260,6 +266,9 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
                 graph = _graph(zc, yc)
             zt, share = _transport(zc, mu, yc, nu, _TEMPERATURE * width, graph)
             z = z + _OVERRELAX * smooth(zt - zc, share)
+            if decay and level == 1 and width > spacing:
+                pose = _affine(x, z)
+                z = pose + (1.0 - decay) * (z - pose)
         if width == spacing:
             return _average(x, z)
         if level == levels:
@@ -342,8 +351,7 @@ def _average(x: np.ndarray, z: np.ndarray) -> np.ndarray:
     it is (the mean of a stretch over a curved patch lies inside it: averaged beyond the
     best similarity, a sphere of 162 nodes stretched onto an ellipsoid (2, 1, 0.5)
     landed 1.5, not 2, along it, its tips unpaired)."""
-    lift = np.c_[x, np.ones(len(x))]
-    base = lift @ np.linalg.lstsq(lift, z, rcond=None)[0]
+    base = _affine(x, z)
     k = min(_AVERAGE, len(x))
     near = cKDTree(x).query(x, k=k)[1].reshape(len(x), k)
     mean = csr_matrix((np.full(near.size, 1.0 / k), near.ravel(),
@@ -352,3 +360,10 @@ def _average(x: np.ndarray, z: np.ndarray) -> np.ndarray:
     for _ in range(_AVERAGE_PASSES):
         move = mean @ move
     return base + move
+
+
+def _affine(x: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """The best affine map (least squares) of the nodes ``x`` (m, 3) onto their landings
+    ``z`` (m, 3), applied to ``x``."""
+    lift = np.c_[x, np.ones(len(x))]
+    return lift @ np.linalg.lstsq(lift, z, rcond=None)[0]
