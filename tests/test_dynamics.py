@@ -89,9 +89,10 @@ def test_arclength_rule_follows_the_partners_way_round_not_the_shorter():
     assert np.all(np.diff(t.targets(STEM)[2:, 0]) < 0)  # in the source's order
 
 
-def test_two_partners_half_round_apart_take_the_contours_orientation():
-    """Two matched nodes whose partners lie half the target apart say nothing of the way
-    round: the contours' orientations do (both the same way: forwards). An exclamation
+def test_two_partners_take_the_contours_orientation():
+    """Two matched nodes of a closed contour say nothing of the way round (their two
+    stretches make one round either way): the contours' orientations do (both the same
+    way: forwards). An exclamation
     mark's bar (6 nodes, DejaVu Sans Mono) onto a drop (18 nodes, STIX): the bar's top
     corners land on the drop's top, not on its bottom tip (the shorter way)."""
     bar = np.array([[25.2, 72.9], [35.1, 72.9], [35.1, 40.9], [34.1, 23.5], [26.2, 23.5],
@@ -103,6 +104,21 @@ def test_two_partners_half_round_apart_take_the_contours_orientation():
     t = LoadTargets(bar, drop, np.c_[[2, 5], [16, 1]], ordered=True, closed=(True, True))
     assert t.turn == 1
     assert np.all(t.targets(bar)[[0, 1], 1] > 60)  # on the drop's top (55.7..67.6)
+
+
+def test_a_local_inversion_of_the_pairs_takes_the_shorter_way():
+    """Partners running forwards but for two swapped ones: the stretch between the swapped
+    pair is not walked the long way round (the mean rule (20) would average the whole
+    target there and pull the node to the middle); it stays between its neighbours."""
+    u = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    circle, ellipse = np.c_[np.cos(u), np.sin(u)], np.c_[1.5 * np.cos(u), np.sin(u)]
+    src = np.arange(0, 60, 3)
+    dst = src.copy()
+    dst[10], dst[11] = 33, 30  # 30 -> 33 and 33 -> 30
+    t = LoadTargets(circle, ellipse, np.c_[src, dst], ordered=True, closed=(True, True),
+                    rule="mean")
+    assert t.turn == 1
+    assert np.linalg.norm(t.targets(circle)[31] - ellipse[31]) < 0.5  # it was 1.3 off
 
 
 def test_newmark_free_oscillator_conserves_energy():

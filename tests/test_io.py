@@ -75,8 +75,9 @@ def test_text_written_with_a_header(tmp_path):
     "id,y,x,label\n1,0,0,a\n2,0,2,b\n3,1,2,c\n4,1.5,0.5,d\n5,1,0,e\n",  # named columns
     "0,0\n2,0\n2,1\n0.5,1.5\n0,1\n0,0\n",  # closed contour written with its first node
     "0,0\n2,0\n2,0\n2,1\n0.5,1.5\n0.5,1.5\n0.5,1.5\n0,1\n0,0\n",  # doubled nodes
+    "0,0\n2,0\n2,1\n0.5,1.5\n0,1\n0,0\n0,0\n",  # the closing node doubled
 ], ids=["plain", "header", "quoted", "spaces", "tabs", "whitespace", "semicolon", "bom",
-        "named", "repeated-first", "doubled"])
+        "named", "repeated-first", "doubled", "closing-doubled"])
 def test_text_variants(tmp_path, text):
     path = tmp_path / "shape.csv"
     path.write_text(text, encoding="utf-8")

@@ -108,6 +108,25 @@ def test_a_turn_alone_takes_one_step():
     assert_allclose(r.shapes[1], _rotate(a, np.pi, shift=(5.0, 0.0)), atol=1e-9)
 
 
+def test_co_rotation_edges():
+    """Two pairs fix a 2D turn (co-rotated); free_motion='none', where a turn strains, is
+    not co-rotated; pairs that all name one target node fix no similarity: the morph
+    ends as before (the hint's similarity is left out), no error after the run."""
+    u = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    ellipse = np.c_[2 * np.cos(u), np.sin(u)]
+    turned = _rotate(ellipse, np.radians(170))
+    two = morph(ellipse, turned, matching=np.c_[[0, 30], [0, 30]], max_steps=30)
+    assert two.co_rotation is not None
+    size = np.array([_rms(s) for s in two.shapes])
+    assert size.min() >= 0.9 * size[0]  # straight paths: 0.11 of it
+    a, b, pairs = _hands(0, 1, 100)
+    none = morph(a, _rotate(b, np.pi / 2), matching=pairs, free_motion="none", max_steps=10)
+    assert none.co_rotation is None
+    one = morph(ellipse, 1.2 * ellipse, matching=np.c_[np.arange(60), np.zeros(60, int)],
+                max_steps=20)
+    assert one.co_rotation is None and one.steps > 0
+
+
 def test_a_small_turn_keeps_straight_paths():
     """Pairs turning by less than CO_ROTATE morph as they always did: no co-rotation."""
     a, b, pairs = _hands(0, 1, 100)

@@ -55,7 +55,8 @@ from .simulation.driver import mean_pair_distance
 from .simulation.result import stop_sentence
 from .threads import limit
 
-__all__ = ["CO_ROTATE", "Morph", "MorphDivergedError", "co_rotated", "morph", "SPARSE_MODES"]
+__all__ = ["COINCIDENT", "CO_ROTATE", "Morph", "MorphDivergedError", "co_rotated", "morph",
+           "SPARSE_MODES"]
 
 # Pairs that turn the source by more than this many degrees are taken as a rigid turn
 # along the steps (Morph.co_rotation). Straight node paths shrink a turning shape: by
@@ -63,6 +64,9 @@ __all__ = ["CO_ROTATE", "Morph", "MorphDivergedError", "co_rotated", "morph", "S
 # passes through a point (a hand: 0.98 of its size at 30 deg, 0.72 at 90, 0.04 at 180;
 # method.md §4, "Large turns").
 CO_ROTATE = 30.0
+# Pair points spread over less than this fraction of their magnitude fix no similarity
+# (every pair naming one target node): the tolerance of a Shape's "nearly one point".
+COINCIDENT = 1e-10
 
 log = logging.getLogger(__name__)
 
@@ -137,7 +141,9 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
         model, loads, time integration and stop test (the module's docstring says why the
         defaults are what they are).
     progress : callable, optional
-        Called after every step as ``progress(step, mean_distance)`` (user units).
+        Called after every step as ``progress(step, distance)``: the mean distance of the
+        pulled nodes to their partners, in user units (with a co-rotation, that of the
+        run on the turned source, which the shapes then turn with).
     **overrides
         :class:`MorphOptions` fields (``k=60``, ``max_steps=20``, ...) replacing those of
         ``options``; and the matcher's options MorphOptions does not have (``rotation``,
@@ -182,7 +188,8 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
         if options.remove_rigid:  # section 5.2: Horn's similarity from the matched pairs
             similarity = align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]], scale=True)
             work = src.with_points(similarity.apply(src.points))
-        elif (turned := _large_turn(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]])):
+        elif options.free_motion != "none" and (turned := _large_turn(
+                src.points[pairs[:, 0]], tgt.points[pairs[:, 1]])):  # "none": turns strain
             work = src.with_points(turned.apply(src.points))
         sim = Simulation(work, tgt, pairs, options, matching.contours)
         run = sim.run(progress).result()
@@ -195,7 +202,8 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
         crossed = step_crossings(run.shapes, src)
     turn = None
     if crossed is not None and np.any(crossed) and not options.remove_rigid and turned is None:
-        turn = align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]], scale=True).angle
+        found = _pairs_similarity(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]])
+        turn = None if found is None else found.angle
     said = intersection_sentence(crossed, model_nodes=run.resolved.model_nodes, nodes=src.m,
                                  turn=turn, contours=src.dim == 2)
     if sim.system.partners is not None:
@@ -211,16 +219,22 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
                  self_intersections=crossed, co_rotation=turned)
 
 
-def _large_turn(a: np.ndarray, b: np.ndarray) -> Similarity | None:
-    """Horn's similarity of the pairs (``a`` onto ``b``) when it turns by more than
-    ``CO_ROTATE`` degrees, else None (also for pairs that fix none)."""
-    if len(a) <= a.shape[1]:
+def _pairs_similarity(a: np.ndarray, b: np.ndarray) -> Similarity | None:
+    """Horn's similarity of the pairs (``a`` onto ``b``), or None where they fix none (one
+    pair in 2D, two in 3D; coincident points on either side)."""
+    if len(a) < a.shape[1] or any(np.ptp(x, axis=0).max() <= COINCIDENT * max(
+            1.0, np.abs(x).max()) for x in (a, b)):
         return None
     try:
-        turn = align(a, b, scale=True)
-    except ShapeError:  # coincident source points: no turn to take
+        return align(a, b, scale=True)
+    except ShapeError:
         return None
-    return turn if turn.angle > CO_ROTATE else None
+
+
+def _large_turn(a: np.ndarray, b: np.ndarray) -> Similarity | None:
+    """:func:`_pairs_similarity` when it turns by more than ``CO_ROTATE`` degrees."""
+    turn = _pairs_similarity(a, b)
+    return turn if turn is not None and turn.angle > CO_ROTATE else None
 
 
 def co_rotated(run: Run, turn: Similarity, source: np.ndarray, target: Shape,
@@ -228,19 +242,21 @@ def co_rotated(run: Run, turn: Similarity, source: np.ndarray, target: Shape,
     """A run computed from the source turned by ``turn`` (its pairs' similarity) given in
     the source's frame: step k's shape is taken back by the inverse turn and forward by
     the part ``w_k`` of it (:meth:`Similarity.part`, about the source's centroid), ``w_k``
-    the share of the initial mean pair distance closed by step k (never decreasing, 1 at
-    the last step, whose shape stays as computed); loads turn with the shapes, mean
-    distances are measured anew; the energies are the deformation's, which no similarity
-    changes (method.md §4, "Large turns"). A run that starts within the tolerance takes
+    the share of the run's whole displacement made by step k (its projection on the
+    last step's, never decreasing: 0 at the source, 1 at the last step, whose shape stays
+    as computed); loads turn with the shapes, mean distances are measured anew; the
+    energies are the deformation's, which no similarity changes when similarities move
+    freely (method.md §4, "Large turns"). A run that starts within the tolerance takes
     the turn in one step."""
     if run.steps == 0:
         unit = "input units" if target.frame is None else target.frame.unit
         run = replace(run, **{f: np.repeat(getattr(run, f), 2, axis=0) for f in (
             "shapes", "loads", "energy", "node_energy", "mean_distance")},
             message=stop_sentence(run.stop_reason, 1, run.distance, run.tolerance, unit))
-    d = run.mean_distance
-    w = np.maximum.accumulate(np.clip(1.0 - d / d[0], 0.0, 1.0) if d[0] > 0 else
-                              np.ones_like(d))
+    u = (run.shapes - run.shapes[0]).reshape(len(run.shapes), -1)
+    whole = float(u[-1] @ u[-1])
+    w = np.maximum.accumulate(np.clip(u @ u[-1] / whole, 0.0, 1.0)) if whole > 0 else \
+        np.ones(len(u))
     w[0], w[-1] = 0.0, 1.0
     back, centre = turn.inverse(), source.mean(axis=0)
     shapes, loads = run.shapes.copy(), run.loads.copy()

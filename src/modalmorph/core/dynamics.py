@@ -236,7 +236,8 @@ class LoadTargets:
             if self.rule == "arclength":
                 groups.append(("fixed", *self._along(a, c, np.asarray(nodes), target_closed)))
             else:
-                cand = _between(self.partner[a], self.partner[c], n, target_closed, self.turn)
+                cand = _between(self.partner[a], self.partner[c], n, target_closed,
+                                self._way(self.partner[a], self.partner[c], n))
                 groups.append(("mean", np.asarray(nodes), cand))
         if carry_nodes and self.rule == "arclength" and not target_closed:
             groups += self._ends(np.asarray(carry_nodes), midx)
@@ -302,6 +303,17 @@ class LoadTargets:
                 [np.interp(t, s, path[:, k]) for k in range(path.shape[1])])))
         return groups
 
+    def _way(self, a2: int, c2: int, n: int) -> int:
+        """The way from partner ``a2`` to ``c2`` round a closed target of ``n`` nodes:
+        :attr:`turn`, unless a stretch that way holds another matched node's partner (a
+        local inversion of the pairs, which the long way round would average the whole
+        target over), then 0 (the shorter way)."""
+        if self.turn == 0:
+            return 0
+        start, length = (a2, (c2 - a2) % n) if self.turn > 0 else (c2, (a2 - c2) % n)
+        inside = (self.partner[self.matched] - start) % n
+        return 0 if np.any((inside > 0) & (inside < length)) else self.turn
+
     def _along(self, a: int, c: int, nodes: np.ndarray, target_closed: bool):
         """Arclength rule: the unmatched ``nodes`` between matched ``a`` and ``c`` laid
         along the target from ``a'`` to ``c'`` at their fractions of the source's arc
@@ -314,7 +326,8 @@ class LoadTargets:
             fwd, bwd = (c2 - a2) % n, (a2 - c2) % n
             if a == c:  # one matched node: round the whole target, the source's way
                 fwd = bwd = n
-            ahead = self.turn > 0 or (self.turn == 0 and fwd <= bwd)
+            turn = self._way(a2, c2, n)
+            ahead = turn > 0 or (turn == 0 and fwd <= bwd)
             path = (a2 + np.arange(fwd + 1)) % n if ahead else (a2 - np.arange(bwd + 1)) % n
         else:
             path = np.arange(a2, c2 + 1) if a2 <= c2 else np.arange(a2, c2 - 1, -1)
@@ -435,9 +448,10 @@ def _fractions(path: np.ndarray) -> np.ndarray:
 
 def _turn(partners: np.ndarray, n: int, closed: bool) -> int:
     """+1 where the partners of a contour's matched nodes (in the source's order) run
-    forwards round a closed target of ``n`` nodes, -1 backwards, 0 where it is a tie (two
-    nodes matched half the target apart): the way each stretch between partners is
-    taken. The shorter way, taken alone, runs a stretch of more than half the target
+    forwards round a closed target of ``n`` nodes, -1 backwards, 0 where it is a tie (any
+    two matched nodes of a closed source: their two stretches make one round either way;
+    two of an open source half the target apart): the way each stretch between partners
+    is taken. The shorter way, taken alone, runs a stretch of more than half the target
     backwards: the stem of a sans-serif 'i' (4 nodes) onto a serif one (10) laid its
     foot's nodes on the serif's top, 21.6 units off its foot."""
     if len(partners) < 2:
@@ -450,8 +464,8 @@ def _turn(partners: np.ndarray, n: int, closed: bool) -> int:
 
 def _orientation(points: np.ndarray) -> int:
     """+1 for a 2D closed contour that runs anticlockwise (its signed area, y up), -1
-    clockwise, 0 in 3D: the way partners run when pairs do not tell (:func:`_turn`: two
-    nodes matched half the target apart; one node)."""
+    clockwise, 0 in 3D: the way partners run when pairs do not tell (:func:`_turn`: one
+    or two nodes matched)."""
     if points.shape[1] != 2:
         return 0
     x, y = points.T

@@ -220,8 +220,9 @@ def _drop_repeats(pts: np.ndarray, contours, name: str) -> tuple[np.ndarray, tup
     keep[ends[:-1]] = True  # a contour's first node never repeats the last contour's
     doubled = int(np.count_nonzero(~keep))
     for k, end in zip(sizes, ends, strict=True):
-        if k > 1 and end <= len(pts) and np.array_equal(pts[end - k], pts[end - 1]):
-            keep[end - 1] = False
+        kept = np.flatnonzero(keep[end - k:end]) + end - k if end <= len(pts) else []
+        if len(kept) > 1 and np.array_equal(pts[kept[0]], pts[kept[-1]]):
+            keep[kept[-1]] = False  # its last node kept, where it repeats its first
     if keep.all() or np.count_nonzero(keep) < 3:  # a point: the shape's check says so
         return pts, contours
     if doubled:
