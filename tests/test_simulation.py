@@ -190,9 +190,12 @@ def test_similarity_free_full_is_the_diagonal_form_with_dependent_fields():
         w = np.sort(rng.uniform(1, 100, 60))
         B = rng.normal(size=(60, 7)) * rng.uniform(0.1, 10, 7)
         B[:, 6] = B[:, 0] - 2 * B[:, 3]  # dependent
-        want = similarity_free(w, B)
-        assert_allclose(similarity_free_full(np.diag(w**2), B), want,
-                        atol=1e-10 * np.abs(want).max())
+        want, (c, y) = similarity_free(w, B)
+        got, (c_full, y_full) = similarity_free_full(np.diag(w**2), B)
+        assert_allclose(got, want, atol=1e-10 * np.abs(want).max())
+        x = rng.normal(size=60)  # the same similarity part, which K_el leaves out
+        assert_allclose(c_full @ (y_full @ x), c @ (y @ x), atol=1e-9 * np.abs(x).max())
+        assert_allclose(want @ (c @ (y @ x)), 0.0, atol=1e-9 * np.abs(want).max())
 
 
 def test_lifted_stiffness_paths_are_the_lifted_copies_bitwise():

@@ -86,6 +86,10 @@ class ModalSystem:
         The pairs the springs (19) pull together (:attr:`LoadTargets.pairs`).
     stiffness : ndarray, shape (n, n)
         The elastic stiffness ``K_el`` (13), the similarity motions free or not.
+    similar : tuple of ndarray or None
+        ``(C, Y)``, (n, r) and (r, n): the similarity part of coordinates ``x`` is
+        ``C (Y x)``, the one ``K_el`` leaves out (None: none left out, ``free_motion``
+        "none"); the node energies (25) are those of ``x`` less it.
     kappa : float or None
         The consistent loads' modal spring (None: loads through the field, node by node).
     fit : tuple or None
@@ -115,6 +119,7 @@ class ModalSystem:
     loads: LoadTargets
     pulled: np.ndarray
     stiffness: np.ndarray
+    similar: tuple | None
     kappa: float | None
     newmark: Newmark
     partners: np.ndarray | None = None
@@ -178,10 +183,13 @@ class ModalSystem:
 
     def energies(self, x: np.ndarray) -> tuple[float, np.ndarray]:
         """The strain energy (22) at ``x`` and its share at every node (25), in units of
-        ``k_ref L^2``: ``x^T K_el x`` and ``u . (K U)`` with ``K U = M Phi K_el x``."""
+        ``k_ref L^2``: ``x^T K_el x`` and ``u . (K U)`` with ``K U = M Phi K_el x`` and
+        ``u`` the displacement less its similarity part (:attr:`similar`), which strains
+        nothing in all but shares out +- terms node by node (method.md §6)."""
         k_ref, K_el = self.k_ref, self.stiffness
         energy = float(x @ K_el @ x) / k_ref  # (22), x^T (Phi^T K Phi) x
-        e = node_energy(self.basis.at_nodes(x), self.basis.mass(K_el @ x),
+        own = x if self.similar is None else x - self.similar[0] @ (self.similar[1] @ x)
+        e = node_energy(self.basis.at_nodes(own), self.basis.mass(K_el @ x),
                         self.source.dim) / k_ref  # (25), model nodes
         return energy, (e if self.spread is None else self.spread @ e)
 
@@ -218,7 +226,7 @@ def _source_part(source: Shape, o: MorphOptions) -> dict:
     fit = _gram_factor(field) if fitted else None
     # after the springs (their arrays kept): the whitened stiffness it frees leaves a
     # hole the damping matrix fits in, not fresh pages at the heap's top (issue 22)
-    stiffness = elastic_stiffness(basis, model.points, o.free_motion)
+    stiffness, similar = elastic_stiffness(basis, model.points, o.free_motion)
     uniform = kappa is not None and o.scheme == "implicit"  # K_mod = K_el + kappa I
     # K_mod = K_el + kappa I is K_el read with its diagonal lifted (no (n, n) copy)
     # where only its diagonal and products with it are needed (one damping ratio)
@@ -230,7 +238,7 @@ def _source_part(source: Shape, o: MorphOptions) -> dict:
                       o.dt / w_ref, o.alpha, o.delta, lift=lift)
     return dict(reduced=reduced, model=model, n_modes=n_modes, basis=basis,
                 field=field, spread=spread, k_ref=k_ref,
-                k_abs=k_abs, source_n=X1, stiffness=stiffness, kappa=kappa,
+                k_abs=k_abs, source_n=X1, stiffness=stiffness, similar=similar, kappa=kappa,
                 newmark=newmark, fit=fit)
 
 
@@ -310,21 +318,23 @@ def _gram_factor(field) -> tuple:
     return linalg.cho_factor(gram)
 
 
-def elastic_stiffness(basis, points: np.ndarray, free_motion: str) -> np.ndarray:
+def elastic_stiffness(basis, points: np.ndarray, free_motion: str) -> tuple:
     """The elastic stiffness in the coordinates of ``basis``: ``Phi^T K Phi`` (13), or
     with the similarity motions of the model's nodes ``points`` free
     (``"similarity"``; an :class:`ElementBasis` then hands its own over,
-    :meth:`~ElementBasis.take_stiffness`)."""
+    :meth:`~ElementBasis.take_stiffness`); and the factors ``(C, Y)`` of the similarity
+    part ``C (Y x)`` it leaves out (None for ``"none"``)."""
     if free_motion == "none":
-        return basis.stiffness()
+        return basis.stiffness(), None
     B = basis.mass_t(similarity_fields(points))
     if isinstance(basis, ModeBasis):
         return similarity_free(basis.modes.frequencies, B)
     return similarity_free_full(basis.take_stiffness(), B)  # K_w freed once it is used
 
 
-def similarity_free(frequencies: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """Modal stiffness with the similarity motions free: ``min_a (U - S a)^T K (U - S a)``.
+def similarity_free(frequencies: np.ndarray, B: np.ndarray) -> tuple:
+    """Modal stiffness with the similarity motions free: ``min_a (U - S a)^T K (U - S a)``,
+    and the factors ``(C, Y)`` of the best-fitting similarity part ``C (Y x)``.
 
     ``B = Phi^T M S`` (n, s) are the modal coordinates of the similarity fields ``S``.
     The elastic energy of ``U = Phi x`` less that of its best-fitting similarity part is
@@ -333,12 +343,14 @@ def similarity_free(frequencies: np.ndarray, B: np.ndarray) -> np.ndarray:
     """
     W = frequencies[:, None] * B
     U, sv, _ = np.linalg.svd(W, full_matrices=False)
-    OmU = frequencies[:, None] * U[:, sv > RANK_TOL * sv.max()]
+    U = U[:, sv > RANK_TOL * sv.max()]
+    OmU = frequencies[:, None] * U
     K = np.diag(frequencies**2) - OmU @ OmU.T
-    return (K + K.T) / 2
+    # the similarity part: Omega^-1 P Omega x, P = U U^T (its energy is what K drops)
+    return (K + K.T) / 2, (U / frequencies[:, None], OmU.T)
 
 
-def similarity_free_full(K: np.ndarray, B: np.ndarray) -> np.ndarray:
+def similarity_free_full(K: np.ndarray, B: np.ndarray) -> tuple:
     """:func:`similarity_free` for a full stiffness ``K`` (n, n) (not diagonal):
     ``K - K B (B^T K B)^+ B^T K``, the same rank rule on the singular values of the
     similarity fields' image (the square roots of the eigenvalues of ``B^T K B``), at
@@ -350,7 +362,8 @@ def similarity_free_full(K: np.ndarray, B: np.ndarray) -> np.ndarray:
     keep = root > max(RANK_TOL, np.sqrt(len(lam) * np.finfo(float).eps)) * root.max()
     Z = KB @ (V[:, keep] / root[keep])
     out = Z @ Z.T  # one syrk: exactly symmetric, as K is
-    return np.subtract(K, out, out=out)  # K - Z Z^T, no second (n, n) array
+    # the similarity part: B (B^T K B)^+ B^T K x = (B V / root) (Z^T x)
+    return np.subtract(K, out, out=out), (B @ (V[:, keep] / root[keep]), Z.T)
 
 
 def springs(field, k_abs: float, *, consistent: bool):
