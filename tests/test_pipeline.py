@@ -127,6 +127,19 @@ def test_co_rotation_edges():
     assert one.co_rotation is None and one.steps > 0
 
 
+def test_node_energies_do_not_follow_the_pose():
+    """The node energies (25) are those of the displacement less its similarity part: the
+    target turned 20 deg gives nearly the map of 0 deg (correlation 0.97; 0.44 when the
+    similarity part's +- terms were shared out), and they still add up to the energy."""
+    a, b, pairs = _hands(0, 3, 100)
+    still = morph(a, b, matching=pairs)
+    turned = morph(a, _rotate(b, np.radians(20)), matching=pairs)
+    assert turned.co_rotation is None  # straight paths
+    for r in (still, turned):
+        assert_allclose(r.node_energy.sum(axis=1), r.energy, rtol=1e-9, atol=1e-12)
+    assert np.corrcoef(still.node_energy[-1], turned.node_energy[-1])[0, 1] > 0.95
+
+
 def test_a_small_turn_keeps_straight_paths():
     """Pairs turning by less than CO_ROTATE morph as they always did: no co-rotation."""
     a, b, pairs = _hands(0, 1, 100)
