@@ -198,8 +198,8 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
     crossed = None
     if src.dim == 3 and src.has_faces:
         crossed = step_self_intersections(run.shapes, src.faces)
-    elif src.dim == 2 and src.ordered:  # a contour folded through itself
-        crossed = step_crossings(run.shapes, src)
+    elif src.dim == 2 and src.ordered:  # a contour folded through itself; the source is
+        crossed = np.r_[0, step_crossings(run.shapes[1:], src)]  # simple (check_contours)
     turn = None
     if crossed is not None and np.any(crossed) and not options.remove_rigid and turned is None:
         found = _pairs_similarity(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]])

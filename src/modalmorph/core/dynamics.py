@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from bisect import bisect_right
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -110,6 +111,7 @@ class LoadTargets:
         self.partner = np.full(m, -1)
         self.partner[pairs[:, 0]] = pairs[:, 1]
         self.turn = 0  # the way the partners run round a closed target: +1, -1, 0 unknown
+        self._sorted = None  # the matched partners, sorted (_way)
         if ordered and target_closed:
             self.turn = _turn(self.partner[self.matched], len(target), closed) or (
                 _orientation(source) * _orientation(target) if closed else 0)
@@ -311,8 +313,10 @@ class LoadTargets:
         if self.turn == 0:
             return 0
         start, length = (a2, (c2 - a2) % n) if self.turn > 0 else (c2, (a2 - c2) % n)
-        inside = (self.partner[self.matched] - start) % n
-        return 0 if np.any((inside > 0) & (inside < length)) else self.turn
+        if self._sorted is None:  # the matched partners, sorted, once (after the releases)
+            self._sorted = sorted(set(self.partner[self.matched].tolist()))
+        after = self._sorted[bisect_right(self._sorted, start) % len(self._sorted)]
+        return 0 if 0 < (after - start) % n < length else self.turn
 
     def _along(self, a: int, c: int, nodes: np.ndarray, target_closed: bool):
         """Arclength rule: the unmatched ``nodes`` between matched ``a`` and ``c`` laid
