@@ -253,10 +253,11 @@ def co_rotated(run: Run, turn: Similarity, source: np.ndarray, target: Shape,
         run = replace(run, **{f: np.repeat(getattr(run, f), 2, axis=0) for f in (
             "shapes", "loads", "energy", "node_energy", "mean_distance")},
             message=stop_sentence(run.stop_reason, 1, run.distance, run.tolerance, unit))
-    u = (run.shapes - run.shapes[0]).reshape(len(run.shapes), -1)
-    whole = float(u[-1] @ u[-1])
-    w = np.maximum.accumulate(np.clip(u @ u[-1] / whole, 0.0, 1.0)) if whole > 0 else \
-        np.ones(len(u))
+    last = run.shapes[-1] - run.shapes[0]
+    whole = float(np.vdot(last, last))  # a step at a time: no copy of every step's shape
+    made = np.array([np.vdot(shape - run.shapes[0], last) for shape in run.shapes])
+    w = np.maximum.accumulate(np.clip(made / whole, 0.0, 1.0)) if whole > 0 else \
+        np.ones(len(made))
     w[0], w[-1] = 0.0, 1.0
     back, centre = turn.inverse(), source.mean(axis=0)
     shapes, loads = run.shapes.copy(), run.loads.copy()
