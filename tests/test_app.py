@@ -13,6 +13,7 @@ import re
 import shutil
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,7 @@ from numpy.testing import assert_allclose
 
 from modalmorph import morph
 from modalmorph.apps.app import MAX_UPLOAD, make_server, morph_options, parse_options
+from modalmorph.apps.policy import APP_LIMITS
 from modalmorph.apps.report import result_payload, write_html
 from modalmorph.apps.runs import FORM_CLASSES
 from modalmorph.datasets import heart_shape
@@ -69,8 +71,9 @@ def test_parse_options_reads_the_form():
 
 
 @pytest.fixture(scope="module")
-def server():
-    srv = make_server("127.0.0.1", 0)
+def server():  # room for a run that is stopped to be still running then (see below)
+    srv = make_server("127.0.0.1", 0, limits=replace(APP_LIMITS, max_steps=100_000,
+                                                      max_node_steps=4_000_000))
     thread = threading.Thread(target=srv.serve_forever, daemon=True)
     thread.start()
     yield srv
@@ -151,8 +154,9 @@ def test_upload_run_stop_and_download_over_http(server):
     assert status == 400 and answer["field"] == "k"  # refused before any run
     assert answer["error"].startswith("options: k must be a number in [1e-06, 1e+06]")
 
-    # Stop: a run that would take 5000 steps ends at the next step
-    job = _run(server, *ids, {"k": "0.01", "dt": "0.001", "max_steps": "5000",
+    # Stop: a run that would take 100 000 steps ends at the next step (5000 steps of 40
+    # nodes end in 0.3-0.6 s, before a loaded machine's test thread stopped them)
+    job = _run(server, *ids, {"k": "0.01", "dt": "0.001", "max_steps": "100000",
                               "equilibrium_tol": "0"})
     for _ in range(600):
         if _request(server, "GET", f"/api/job/{job}")[1]["step"] > 0:

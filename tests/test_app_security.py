@@ -86,14 +86,17 @@ def _csv(points) -> bytes:
     return ("x,y\n" + "\n".join(f"{x:.6f},{y:.6f}" for x, y in points)).encode()
 
 
-def _circle(n=40, r=1.0):
+def _circle(n=40, r=1.0, petals=0.0):
     t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    r = r * (1 + petals * np.cos(3 * t))
     return np.c_[r * np.cos(t), r * np.sin(t)]
 
 
 def _shapes(srv, n=40):
+    """A circle and a flower: not a similarity of each other (a circle onto a larger one
+    is reached by the pairs' turn and scale alone, in one step, whatever the springs)."""
     ids = []
-    for name, pts in (("a.csv", _circle(n)), ("b.csv", _circle(n, 1.3))):
+    for name, pts in (("a.csv", _circle(n)), ("b.csv", _circle(n, 1.3, petals=0.2))):
         status, shape = _request(srv, "POST", f"/api/upload?name={name}", _csv(pts))
         assert status == 200, shape
         ids.append(shape["id"])
