@@ -839,6 +839,7 @@ def test_save_result(tmp_path):
         "steps": morph.steps, "matches": 6, "source_nodes": 12, "target_nodes": 12, "dim": 2,
         "mean_distance": morph.mean_distance.tolist(), "energy": morph.energy.tolist(),
         "self_intersections": [0] * (morph.steps + 1),  # a contour that never crosses
+        "similarity": None, "co_rotation": None,  # no rigid part removed or turned
     }
     assert result["parameters"]["k"] == morph.options.k
     assert result["parameters"]["model_nodes"] == morph.resolved.model_nodes == 12
@@ -849,6 +850,25 @@ def test_save_result(tmp_path):
             assert_array_equal(data[key], getattr(morph, key))
         assert_array_equal(data["pairs"], morph.matching.pairs)
     assert_array_equal(read_shape(out / "final_shape.csv").points, morph.shapes[-1])
+
+
+def test_result_json_records_the_similarity_removed_or_turned(tmp_path):
+    """result.json gives the similarity a morph removed first (remove_rigid) or took
+    along the steps (co_rotation): its angle, scale, rotation and translation."""
+    a = np.linspace(0.0, 2.0 * np.pi, 24, endpoint=False)
+    egg = np.c_[np.cos(a) + 0.2 * np.cos(2 * a), 0.6 * np.sin(a)]
+    turn = np.array([[0.0, -1.0], [1.0, 0.0]])  # 90 deg
+    pairs = np.c_[0:24, 0:24]
+    for kind, options in (("co_rotation", {}), ("similarity", {"remove_rigid": True})):
+        morph = modalmorph.morph(egg, 1.2 * egg @ turn.T + 3.0, matching=pairs, **options)
+        save_result(morph, tmp_path / kind)
+        result = json.loads((tmp_path / kind / "result.json").read_text())
+        other = "similarity" if kind == "co_rotation" else "co_rotation"
+        assert result[other] is None
+        assert result[kind]["angle"] == pytest.approx(90.0, abs=1e-6)
+        assert result[kind]["scale"] == pytest.approx(1.2, rel=1e-9)
+        assert_allclose(result[kind]["rotation"], turn, atol=1e-9)
+        assert_allclose(result[kind]["translation"], [3.0, 3.0], atol=1e-9)
 
 
 def test_save_result_rejects_unwritable_options(tmp_path):

@@ -96,9 +96,12 @@ def result_summary(morph, *, options: dict | None = None, inputs: list | None = 
           "dim": int,                     # 2 or 3
           "mean_distance": [float, ...],  # T + 1 values, per step (step 0 = source)
           "energy": [float, ...],         # T + 1 values, strain energy per step
-          "self_intersections": [int, ...] or null  # per step: surfaces, faces cutting
-        }                          # another; 2D contours, pairs of segments that cross;
+          "self_intersections": [int, ...] or null, # per step: surfaces, faces cutting
+                                   # another; 2D contours, pairs of segments that cross;
                                    # null: not checked (point sets, no pymeshlab)
+          "similarity": {...} or null,   # removed first (remove_rigid), Horn's of the pairs
+          "co_rotation": {...} or null   # taken along the steps (a turn over CO_ROTATE)
+        }  # a similarity: {"angle": degrees, "scale", "rotation": d x d, "translation"}
     """
     return {
         "modalmorph_version": __version__,
@@ -118,7 +121,17 @@ def result_summary(morph, *, options: dict | None = None, inputs: list | None = 
         "mean_distance": _finite_or_none(morph.mean_distance),
         "energy": _finite_or_none(morph.energy),
         "self_intersections": _counts_or_none(getattr(morph, "self_intersections", None)),
+        "similarity": _similarity_or_none(getattr(morph, "similarity", None)),
+        "co_rotation": _similarity_or_none(getattr(morph, "co_rotation", None)),
     }
+
+
+def _similarity_or_none(similarity) -> dict | None:
+    if similarity is None:
+        return None
+    return {"angle": similarity.angle, "scale": float(similarity.scale),
+            "rotation": np.asarray(similarity.rotation).tolist(),
+            "translation": np.asarray(similarity.translation).tolist()}
 
 
 def _pairs_array(morph) -> np.ndarray:
