@@ -183,14 +183,16 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
         if not given:
             matching = match(src, tgt, options=match_options)
         pairs = matching.pairs
-        similarity = turned = None
+        similarity = turned = found = None
         work = src
         if options.remove_rigid:  # section 5.2: Horn's similarity from the matched pairs
             similarity = align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]], scale=True)
             work = src.with_points(similarity.apply(src.points))
-        elif options.free_motion != "none" and (turned := _large_turn(
-                src.points[pairs[:, 0]], tgt.points[pairs[:, 1]])):  # "none": turns strain
-            work = src.with_points(turned.apply(src.points))
+        else:  # a large turn taken along the steps ("none": there turns strain)
+            found = _pairs_similarity(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]])
+            if found is not None and found.angle > CO_ROTATE and options.free_motion != "none":
+                turned = found
+                work = src.with_points(turned.apply(src.points))
         sim = Simulation(work, tgt, pairs, options, matching.contours)
         run = sim.run(progress).result()
         if turned is not None:  # the turn taken along the steps, in the source's frame
@@ -200,10 +202,9 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
         crossed = step_self_intersections(run.shapes, src.faces)
     elif src.dim == 2 and src.ordered:  # a contour folded through itself; the source is
         crossed = np.r_[0, step_crossings(run.shapes[1:], src)]  # simple (check_contours)
-    turn = None
-    if crossed is not None and np.any(crossed) and not options.remove_rigid and turned is None:
-        found = _pairs_similarity(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]])
-        turn = None if found is None else found.angle
+    turn = None  # the hint's turn, where folds come of a turn taken as straight paths
+    if crossed is not None and np.any(crossed) and found is not None and turned is None:
+        turn = found.angle
     said = intersection_sentence(crossed, model_nodes=run.resolved.model_nodes, nodes=src.m,
                                  turn=turn, contours=src.dim == 2)
     if sim.system.partners is not None:
@@ -229,12 +230,6 @@ def _pairs_similarity(a: np.ndarray, b: np.ndarray) -> Similarity | None:
         return align(a, b, scale=True)
     except ShapeError:
         return None
-
-
-def _large_turn(a: np.ndarray, b: np.ndarray) -> Similarity | None:
-    """:func:`_pairs_similarity` when it turns by more than ``CO_ROTATE`` degrees."""
-    turn = _pairs_similarity(a, b)
-    return turn if turn is not None and turn.angle > CO_ROTATE else None
 
 
 def co_rotated(run: Run, turn: Similarity, source: np.ndarray, target: Shape,

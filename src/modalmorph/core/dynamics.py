@@ -330,8 +330,7 @@ class LoadTargets:
             fwd, bwd = (c2 - a2) % n, (a2 - c2) % n
             if a == c:  # one matched node: round the whole target, the source's way
                 fwd = bwd = n
-            turn = self._way(a2, c2, n)
-            ahead = turn > 0 or (turn == 0 and fwd <= bwd)
+            ahead = _forward(fwd, bwd, self._way(a2, c2, n))
             path = (a2 + np.arange(fwd + 1)) % n if ahead else (a2 - np.arange(bwd + 1)) % n
         else:
             path = np.arange(a2, c2 + 1) if a2 <= c2 else np.arange(a2, c2 - 1, -1)
@@ -483,6 +482,12 @@ def _span(a2, c2, n: int, turn: int):
     return fwd if turn > 0 else bwd if turn < 0 else np.minimum(fwd, bwd)
 
 
+def _forward(fwd: int, bwd: int, turn: int) -> bool:
+    """Whether a stretch of ``fwd`` target segments forwards (``bwd`` backwards) is
+    walked forwards: the way ``turn`` says, or the shorter way where it is 0."""
+    return turn > 0 or (turn == 0 and fwd <= bwd)
+
+
 def _between(a2: int, c2: int, n: int, closed: bool, turn: int = 0) -> np.ndarray:
     """Target indices strictly between a2 and c2 (on a closed contour the way ``turn``
     says, :func:`_turn`, or the shorter way where it is 0); the two ends themselves when
@@ -490,8 +495,8 @@ def _between(a2: int, c2: int, n: int, closed: bool, turn: int = 0) -> np.ndarra
     if closed:
         fwd = (c2 - a2) % n
         bwd = (a2 - c2) % n
-        ahead = turn > 0 or (turn == 0 and fwd <= bwd)
-        idx = (a2 + np.arange(1, fwd)) % n if ahead else (c2 + np.arange(1, bwd)) % n
+        idx = (a2 + np.arange(1, fwd)) % n if _forward(fwd, bwd, turn) else \
+            (c2 + np.arange(1, bwd)) % n
     else:
         lo, hi = sorted((a2, c2))
         idx = np.arange(lo + 1, hi)
