@@ -433,7 +433,7 @@ def test_a_self_crossing_contour_is_refused_with_where(tmp_path, capsys):
     assert main(["morph", str(tmp_path / "circle.csv"), str(tmp_path / "eight.csv"),
                  "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "target crosses itself: the segment from node" in err[0], err
+    assert len(err) == 1 and "eight.csv crosses itself: the segment from node" in err[0], err
     assert not (tmp_path / "out").exists()
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from .. import figures
 from ..core.material import Material
+from ..core.quality import check_contours
 from ..errors import OptionError, ShapeError
 from ..io import (
     atomic_output_dir,
@@ -173,6 +174,9 @@ def read_pair(source_path, target_path, read: ReadOptions):
         raise ShapeError(f"{source_path} is {source.dim}D but {target_path} is "
                          f"{target.dim}D: both shapes must have the same dimension")
     check_y_directions([source_path, target_path], [source, target])
+    for path, shape in ((source_path, source), (target_path, target)):
+        if shape.dim == 2 and shape.ordered:  # named by its file (match() says "source")
+            check_contours(shape, os.fspath(path))
     return source, target
 
 
