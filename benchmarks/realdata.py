@@ -5,7 +5,8 @@ One row per pair, a summary per family, a pass line per family. Families:
 - ``heart``: the 15 ED -> ES pairs of the Sunnybrook hearts in ``shared/data/heart`` (ES
   is the other contour of the ED's block of 20 images, see its README) and the demo pair
   SC-HF-I-07 0080 -> 0087 (ED of one slice, ES of the next).
-- ``hands``: hand-0 -> hand-k, k = 1..7, as shipped (1590 nodes) and at 250 nodes.
+- ``hands``: hand-0 -> hand-k, k = 1..7, as shipped (1590 nodes) and at 250 nodes, and
+  hand-k -> hand-0 as shipped (hands 1-6 carry tiny knots, digitiser loops, as given).
 - ``glyphs``: the outer contour (largest polygon) of A-Z, a-z, 0-9 in DejaVu Sans -> the
   same character in DejaVu Serif, resampled evenly by arc length (``--glyph-nodes``).
 - ``glyphs-raw``: the same outlines as matplotlib's TextPath gives their vertices (uneven
@@ -150,6 +151,8 @@ def build_pairs(families, data: Path, glyph_nodes, quick: bool):
                     if n:
                         a, b = resample(a, n), resample(b, n)
                     pairs.append(("hands", f"0->{k}" + (f" @{n}" if n else ""), a, b))
+            # hands 1-6 as given carry tiny knots (digitiser loops): as sources too
+            pairs += [("hands", f"{k}->0", hands[k], hands[0]) for k in range(1, 8)]
         elif family in ("glyphs", "glyphs-raw"):
             for ch in CHARS:
                 a, b = (glyph_outline(ch, face) for face in FACES)

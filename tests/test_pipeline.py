@@ -66,13 +66,27 @@ def test_a_contour_folded_through_itself_is_said(monkeypatch):
     monkeypatch.setattr(pipeline, "CO_ROTATE", 360.0)
     a, b, pairs = _hands(0, 1, 100)
     r = morph(a, _rotate(b, np.pi), matching=pairs)
-    assert_array_equal(r.self_intersections, [self_intersections(s) for s in r.shapes])
+    crossings = np.array([self_intersections(s) for s in r.shapes])
+    # folds: every crossing but those closing a loop of tracing noise's size (LOOP_AREA)
+    assert np.all(r.self_intersections <= crossings)
+    assert_array_equal(r.self_intersections > 0, crossings > 0)
     assert r.self_intersections[0] == 0 and r.self_intersections.max() > 0
     assert "steps' contours cross themselves" in r.message
     turn = re.search(r"the pairs turn the source by (\d+) deg", r.message)
     assert turn and int(turn[1]) > 150
     turned = morph(a, _rotate(b, np.pi), matching=pairs, remove_rigid=True)
     assert not np.any(turned.self_intersections) and "cross" not in turned.message
+
+
+def test_tracing_knots_of_the_source_are_no_fold():
+    """The shared hands 1-6 carry 9-17 tiny knots as given (digitiser loops of under
+    4e-5 of the squared size, accepted as simple); they ride along every step: the morph
+    neither counts them as folds nor says that its steps cross themselves."""
+    a, b = load_hand(1), load_hand(2)
+    assert self_intersections(a) > 0  # as given
+    r = morph(a, b)
+    assert r.converged and not np.any(r.self_intersections), r.self_intersections
+    assert "cross" not in r.message
 
 
 @pytest.mark.parametrize("angle", [60, 120, 180])

@@ -2,17 +2,20 @@
 
 import numpy as np
 import pytest
-from numpy.testing import assert_allclose
+from numpy.testing import assert_allclose, assert_array_equal
 
 from modalmorph.core.align import Similarity
 from modalmorph.core.quality import (
     area,
+    check_simple,
     correspondence_rotation,
+    crossing_segments,
     curve_distances,
     roughness,
     self_crossings,
+    step_crossings,
 )
-from modalmorph.core.shape import resample
+from modalmorph.core.shape import Shape, resample
 
 from .conftest import random_rotation, self_intersections
 
@@ -193,3 +196,22 @@ def test_check_simple_accepts_the_tiny_loops_of_real_outlines():
     hand = load_hand(3)  # statismo's annotation has loops of a few nodes
     assert len(crossing_segments(hand)) > 0
     check_simple(hand, "hand 3")
+
+
+def test_step_crossings_counts_folds_not_tracing_knots():
+    """A knot of tracing noise (a loop of 1e-5 of the squared RMS radius, which
+    check_simple accepts) is no fold; a figure eight's lobe is one, within a contour or
+    between two."""
+    t = np.linspace(0, 2 * np.pi, 200, endpoint=False)
+    circle = np.c_[np.cos(t), np.sin(t)]
+    knot = circle.copy()
+    knot[[50, 51]] = knot[[51, 50]]  # two neighbours swapped: a tiny loop
+    u = t + np.pi / 200  # no node at the crossing
+    eight = np.c_[np.sin(u), np.sin(u) * np.cos(u)]
+    shape = Shape(circle)
+    assert len(crossing_segments(knot)) == 1
+    check_simple(knot, "knot")
+    assert_array_equal(step_crossings([circle, knot, eight], shape), [0, 0, 1])
+    two = Shape(np.r_[circle, 0.5 * circle], contours=(200, 200))
+    assert_array_equal(step_crossings([two.points, np.r_[circle, 0.5 * circle + [0.8, 0]]],
+                                      two), [0, 2])

@@ -261,8 +261,22 @@ def check_simple(points, name: str, closed: bool = True) -> None:
     at most :data:`LOOP_AREA` times the squared RMS radius (the tracing noise of real
     outlines) are accepted."""
     p = _points(points, name, dims=(2,))
+    m = len(p)
+    for i, j, x in _folds(p, crossing_segments(p, closed), closed):
+        raise ShapeError(
+            f"{name} crosses itself: the segment from node {i} to {(i + 1) % m} crosses "
+            f"the one from node {j} to {(j + 1) % m} at ({x[0]:.4g}, {x[1]:.4g}); a "
+            "contour must be one simple closed curve (a figure eight or a star is not)")
+    if closed:
+        check_flat(p, name)
+
+
+def _folds(p: np.ndarray, pairs: np.ndarray, closed: bool):
+    """The crossing segment pairs ``(i, j)`` of the contour ``p`` (rows of
+    :func:`crossing_segments`) whose smaller loop encloses more than :data:`LOOP_AREA`
+    times the squared RMS radius, each with where they cross: ``(i, j, x)``."""
     m, scale = len(p), np.mean(np.sum((p - p.mean(axis=0)) ** 2, axis=1))
-    for i, j in crossing_segments(p, closed):
+    for i, j in pairs:
         a, b, c, e = p[i], p[(i + 1) % m], p[j], p[(j + 1) % m]
         u, den = b - a, (b[0] - a[0]) * (e[1] - c[1]) - (b[1] - a[1]) * (e[0] - c[0])
         s = ((c[0] - a[0]) * (e[1] - c[1]) - (c[1] - a[1]) * (e[0] - c[0])) / den \
@@ -270,14 +284,8 @@ def check_simple(points, name: str, closed: bool = True) -> None:
         x = a + s * u  # where segments i and j cross
         inside = np.vstack([x, p[i + 1:j + 1]])
         outside = np.vstack([x, p[j + 1:], p[:i + 1]])
-        loop = min(abs(area(inside)), abs(area(outside)) if closed else np.inf)
-        if loop > LOOP_AREA * scale:
-            raise ShapeError(
-                f"{name} crosses itself: the segment from node {i} to {(i + 1) % m} crosses "
-                f"the one from node {j} to {(j + 1) % m} at ({x[0]:.4g}, {x[1]:.4g}); a "
-                "contour must be one simple closed curve (a figure eight or a star is not)")
-    if closed:
-        check_flat(p, name)
+        if min(abs(area(inside)), abs(area(outside)) if closed else np.inf) > LOOP_AREA * scale:
+            yield int(i), int(j), x
 
 
 def check_contours(shape, name: str) -> None:
@@ -305,15 +313,33 @@ def _check_contours(shape, name: str) -> None:
 
 
 def step_crossings(shapes, shape) -> np.ndarray:
-    """The pairs of segments that cross (:func:`crossing_segments`, within a contour or
-    between two) of a 2D ordered :class:`Shape`'s topology on the nodes of every step,
-    shape (T+1,), int: a contour folded through itself shows there. (About 0.1 ms a step
-    of 70 or 250 nodes, 0.3 ms of 1000; one pass over the segment pairs that overlap at
-    any step took 24 ms at 250 nodes and 4 s at 1000 for a half turn, which sweeps the
-    shape over itself.)"""
+    """The folds of a 2D ordered :class:`Shape`'s topology on the nodes of every step,
+    shape (T+1,), int: the pairs of segments that cross (:func:`crossing_segments`)
+    between two contours, or within one closing a loop larger than the tracing noise
+    :func:`check_simple` accepts (:data:`LOOP_AREA`; the shared hands carry 9-17 such
+    knots as given, and every step with them). (About 0.1 ms a step of 70 or 250 nodes,
+    0.3 ms of 1000; one pass over the segment pairs that overlap at any step took 24 ms
+    at 250 nodes and 4 s at 1000 for a half turn, which sweeps the shape over itself.)"""
     edges = shape.edges
-    return np.array([len(crossing_segments(points, edges=edges)) for points in shapes],
-                    dtype=np.int64)
+    return np.array([_fold_count(points, shape, crossing_segments(points, edges=edges))
+                     for points in shapes], dtype=np.int64)
+
+
+def _fold_count(points: np.ndarray, shape, pairs: np.ndarray) -> int:
+    """How many of the crossing segment pairs ``pairs`` (rows of ``shape.edges``) of the
+    nodes ``points`` are folds (:func:`step_crossings`)."""
+    if not len(pairs):
+        return 0
+    starts = shape.edges[:, 0]
+    part = shape.contour_of[starts]
+    between = part[pairs[:, 0]] != part[pairs[:, 1]]
+    count = int(between.sum())
+    for k in np.unique(part[pairs[~between, 0]]):
+        rows = shape.slices[k]
+        within = pairs[~between & (part[pairs[:, 0]] == k)]
+        local = np.sort(starts[within] - rows.start, axis=1)
+        count += sum(1 for _ in _folds(points[rows], local, shape.closed))
+    return count
 
 
 def roughness(points, closed: bool = True) -> float:
