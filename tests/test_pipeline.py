@@ -444,3 +444,21 @@ def test_results_print_in_a_few_lines():
         text = repr(obj)
         assert len(text.splitlines()) <= 10 and len(text) <= 800, text
         assert "array(" not in text  # no array dumped
+
+
+def test_a_source_too_coarse_for_the_target_is_said():
+    """A 4-node square onto a 200-node circle converges by the stop test's allowance for
+    its node count (the circle drawn through 4 nodes is 1.9 units from itself), and the
+    message says so with the remedy; the same square resampled to 200 nodes is not
+    said to be coarse."""
+    t = np.linspace(0, 2 * np.pi, 200, endpoint=False)
+    circle = 10 * np.c_[np.cos(t), np.sin(t)]
+    u = np.pi / 4 + np.linspace(0, 2 * np.pi, 4, endpoint=False)
+    square = 11 * np.c_[np.cos(u), np.sin(u)]
+    r = morph(square, circle)
+    found = re.search(r"the source has 4 nodes for the target's 200: .* lies ([\d.]+) input "
+                      r"units from itself", r.message)
+    assert r.converged and found and 1.5 < float(found[1]) < 2.5, r.message
+    assert "resample the source" in r.message
+    from modalmorph.core.shape import resample
+    assert "resample" not in morph(resample(square, 200), circle).message

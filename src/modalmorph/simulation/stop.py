@@ -103,6 +103,13 @@ class StopTest:
         """The tolerance on :meth:`distance` (normalised units)."""
         return self.limits.tolerance
 
+    @property
+    def resolution_floor(self) -> float:
+        """How close, at best, a shape of the source's node count follows the target
+        (normalised units): for contours the mean distance from the target to itself
+        drawn through that many nodes spread evenly along it; 0 where not measured."""
+        return 0.0
+
     def distance(self, current: np.ndarray, near: float, lazy: bool = True) -> float:
         """The measure of :attr:`Run.distance` for the shape ``current`` (m, d), given
         ``near``, the mean distance of its pulled pairs (a lower bound of the measure)."""
@@ -146,6 +153,10 @@ class CurveStop(StopTest):
         d_ba = Polyline(current, self.closed).distance(self.target)
         return max(near, float(d_ab.mean()), float(d_ba.mean()) - self.floor)
 
+    @property
+    def resolution_floor(self) -> float:
+        return self.floor
+
 
 class ContourStop(StopTest):
     """Objects of several contours: the largest, over the pairs of partner contours, of
@@ -169,6 +180,10 @@ class ContourStop(StopTest):
             return near
         return max(test.distance(current[rows], near, lazy=False)
                    for rows, test in zip(self.rows, self.tests, strict=True))
+
+    @property
+    def resolution_floor(self) -> float:
+        return max(test.floor for test in self.tests)
 
 
 class SurfaceStop(StopTest):
