@@ -840,6 +840,7 @@ def test_save_result(tmp_path):
         "mean_distance": morph.mean_distance.tolist(), "energy": morph.energy.tolist(),
         "self_intersections": [0] * (morph.steps + 1),  # a contour that never crosses
         "similarity": None, "co_rotation": None,  # no rigid part removed or turned
+        "mirror": None,  # given pairs: no mirror image looked for
     }
     assert result["parameters"]["k"] == morph.options.k
     assert result["parameters"]["model_nodes"] == morph.resolved.model_nodes == 12

@@ -506,3 +506,30 @@ def test_searches_compile_uncached_with_one_warning_where_no_cache_can_be_writte
     with pytest.warns(RuntimeWarning, match="cannot be cached.*NUMBA_CACHE_DIR") as said:
         f, g = _dp._compiled(double), _dp._compiled(double)
     assert len(said) == 1 and f(1.5) == g(1.5) == 3.0
+
+
+def test_a_mirror_image_is_found_and_said():
+    """An asymmetric outline (DejaVu Sans 'b') onto its mirror image, turned, of another
+    font (a Serif 'b' mirrored: a 'd'): Matching.mirror says how much better the source
+    reflected fits (> MIRROR), the morph's message and result say so; onto the Serif 'b'
+    as it is, and with rotation="none", nothing is said."""
+    from matplotlib.font_manager import FontProperties
+    from matplotlib.textpath import TextPath
+
+    from modalmorph import morph
+    from modalmorph.io.results import result_summary
+    from modalmorph.matching import MIRROR
+
+    def outline(face):
+        polygons = TextPath((0, 0), "b", size=10, prop=FontProperties(family=face))
+        return resample(np.asarray(max(polygons.to_polygons(), key=len)[:-1], float), 100)
+
+    a, b = outline("DejaVu Sans"), outline("DejaVu Serif")
+    c, s = np.cos(0.7), np.sin(0.7)
+    d = (b * [-1.0, 1.0]) @ np.array([[c, -s], [s, c]]).T
+    found = match(a, d)
+    assert found.mirror is not None and found.mirror > MIRROR
+    r = morph(a, d, matching=found)
+    assert "the target looks like the source's mirror image" in r.message
+    assert result_summary(r)["mirror"] == pytest.approx(found.mirror)
+    assert match(a, b).mirror is None and match(a, d, rotation="none").mirror is None

@@ -219,6 +219,11 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
     if src.dim == 3 and not src.ordered and not run.converged:
         said += unlike_sentence(pairs, src.m, tgt.m)
     said += _coarse_source(sim.stop, run, src.m, tgt)
+    if getattr(matching, "mirror", None):
+        said += (f"; the target looks like the source's mirror image (the source reflected "
+                 f"fits it {matching.mirror:.3g} times better than turned): no deformation "
+                 "takes a shape into its mirror image without folding it; mirror one input "
+                 "(negate its x) to compare the two")
     if turned is not None:
         said += (f"; the pairs' turn of {turned.angle:.0f} deg taken as a rigid motion along "
                  f"the steps (co_rotation)")

@@ -97,10 +97,13 @@ def result_summary(morph, *, options: dict | None = None, inputs: list | None = 
           "mean_distance": [float, ...],  # T + 1 values, per step (step 0 = source)
           "energy": [float, ...],         # T + 1 values, strain energy per step
           "self_intersections": [int, ...] or null, # per step: surfaces, faces cutting
-                                   # another; 2D contours, pairs of segments that cross;
+                                   # another; 2D contours, folds (pairs of segments that
+                                   # cross, tracing noise's tiny loops left out);
                                    # null: not checked (point sets, no pymeshlab)
           "similarity": {...} or null,   # removed first (remove_rigid), Horn's of the pairs
-          "co_rotation": {...} or null   # taken along the steps (a turn over CO_ROTATE)
+          "co_rotation": {...} or null,  # taken along the steps (a turn over CO_ROTATE)
+          "mirror": float or null        # the target looks like the source's mirror image:
+                                         # how much better the source reflected fits
         }  # a similarity: {"angle": degrees, "scale", "rotation": d x d, "translation"}
     """
     return {
@@ -123,6 +126,7 @@ def result_summary(morph, *, options: dict | None = None, inputs: list | None = 
         "self_intersections": _counts_or_none(getattr(morph, "self_intersections", None)),
         "similarity": _similarity_or_none(getattr(morph, "similarity", None)),
         "co_rotation": _similarity_or_none(getattr(morph, "co_rotation", None)),
+        "mirror": getattr(getattr(morph, "matching", None), "mirror", None),
     }
 
 
