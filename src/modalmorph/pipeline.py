@@ -218,7 +218,7 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
         said += _unpaired(src, tgt, sim.system.partners)
     if src.dim == 3 and not src.ordered and not run.converged:
         said += unlike_sentence(pairs, src.m, tgt.m)
-    said += _coarse_source(sim.stop, run, src.m, tgt)
+    said += _coarse_source(sim.stop, run, tgt)
     if getattr(matching, "mirror", None):
         said += (f"; the target looks like the source's mirror image (the source reflected "
                  f"fits it {matching.mirror:.3g} times better than turned): no deformation "
@@ -233,19 +233,22 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
                  self_intersections=crossed, co_rotation=turned)
 
 
-def _coarse_source(stop, run, m: int, target: Shape) -> str:
+def _coarse_source(stop, run, target: Shape) -> str:
     """What the message adds where the source has too few nodes to follow the target (a
     4-node rectangle onto a circle): fewer than half the target's, and the target drawn
-    through ``m`` nodes spread along it, which the stop test allows
-    (``stop.resolution_floor``), lies more than ``COARSE_SOURCE`` tolerances from it."""
-    if not (2 * m < target.m and stop.resolution_floor > COARSE_SOURCE * stop.tolerance):
+    through as many nodes spread along it, which the stop test allows
+    (``stop.resolution``), lies more than ``COARSE_SOURCE`` tolerances from it; for
+    shapes of several contours, of the partner contours where that is largest."""
+    floor, m, n, partners = stop.resolution
+    if not (2 * m < n and floor > COARSE_SOURCE * stop.tolerance):
         return ""
     unit = "input units" if target.frame is None else target.frame.unit
-    floor = stop.resolution_floor * run.tolerance / stop.tolerance
-    return (f"; the source has {m} nodes for the target's {target.m}: the target drawn "
-            f"through {m} nodes spread along it lies {floor:.3g} {unit} from itself on "
-            "average, which the stop test allows; resample the source to more nodes to "
-            "follow the target closer")
+    floor *= run.tolerance / stop.tolerance
+    src, tgt = ("the source", "the target's") if partners is None else \
+        (f"source contour {partners[0]}", f"target contour {partners[1]}'s")
+    return (f"; {src} has {m} nodes for {tgt} {n}: drawn through {m} nodes spread along "
+            f"it, the target lies {floor:.3g} {unit} from itself on average, which the stop "
+            "test allows; resample the source to more nodes to follow the target closer")
 
 
 def _pairs_similarity(a: np.ndarray, b: np.ndarray) -> Similarity | None:

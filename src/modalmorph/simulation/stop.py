@@ -104,11 +104,14 @@ class StopTest:
         return self.limits.tolerance
 
     @property
-    def resolution_floor(self) -> float:
-        """How close, at best, a shape of the source's node count follows the target
-        (normalised units): for contours the mean distance from the target to itself
-        drawn through that many nodes spread evenly along it; 0 where not measured."""
-        return 0.0
+    def resolution(self) -> tuple[float, int, int, tuple | None]:
+        """How close, at best, a shape of the source's node count follows the target:
+        ``(floor, m, n, partners)``, for contours the mean distance (normalised units)
+        from the target (``n`` nodes) to itself drawn through the source's ``m`` nodes
+        spread evenly along it, for shapes of several contours the pair of partner
+        contours ``(k, j)`` where that is largest; ``(0.0, 0, 0, None)`` where not
+        measured."""
+        return 0.0, 0, 0, None
 
     def distance(self, current: np.ndarray, near: float, lazy: bool = True) -> float:
         """The measure of :attr:`Run.distance` for the shape ``current`` (m, d), given
@@ -140,7 +143,7 @@ class CurveStop(StopTest):
     def __init__(self, limits: Limits, target: np.ndarray, *, closed: bool,
                  target_closed: bool, m: int):
         super().__init__(limits)
-        self.closed = closed
+        self.closed, self.m = closed, m
         self.target = target
         self.to_target = Polyline(target, target_closed)
         self.floor = float(Polyline(resample(target, m, closed=target_closed), target_closed)
@@ -154,8 +157,8 @@ class CurveStop(StopTest):
         return max(near, float(d_ab.mean()), float(d_ba.mean()) - self.floor)
 
     @property
-    def resolution_floor(self) -> float:
-        return self.floor
+    def resolution(self) -> tuple[float, int, int, tuple | None]:
+        return self.floor, self.m, len(self.target), None
 
 
 class ContourStop(StopTest):
@@ -170,6 +173,7 @@ class ContourStop(StopTest):
     def __init__(self, limits: Limits, target: np.ndarray, *, source: Shape,
                  target_shape: Shape, partners: np.ndarray):
         super().__init__(limits)
+        self.partners = partners
         self.rows = [source.slices[k] for k in partners[:, 0]]
         self.tests = [CurveStop(limits, target[target_shape.slices[j]], closed=source.closed,
                                 target_closed=target_shape.closed, m=source.sizes[k])
@@ -182,8 +186,10 @@ class ContourStop(StopTest):
                    for rows, test in zip(self.rows, self.tests, strict=True))
 
     @property
-    def resolution_floor(self) -> float:
-        return max(test.floor for test in self.tests)
+    def resolution(self) -> tuple[float, int, int, tuple | None]:
+        i = int(np.argmax([test.floor for test in self.tests]))
+        floor, m, n, _ = self.tests[i].resolution
+        return floor, m, n, tuple(int(k) for k in self.partners[i])
 
 
 class SurfaceStop(StopTest):
