@@ -22,7 +22,7 @@ from functools import partial
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .core.quality import area, crossing_segments, curve_distances, self_crossings
+from .core.quality import area, curve_distances, step_crossings
 from .core.shape import Shape, as_shape
 from .errors import MorphDivergedError, OptionError, ShapeError
 from .matching import match
@@ -117,8 +117,9 @@ class Track:
         (:func:`curve_distance`, contour by contour for several contours), in the user's
         units.
     crossed : ndarray of bool, shape (F,)
-        Whether a tracked 2D contour crosses itself (or, for several contours, one
-        crosses another) at that frame.
+        Whether a tracked 2D contour folds at that frame: crosses itself beyond tracing
+        noise's tiny loops (or, for several contours, one crosses another), as
+        ``Morph.self_intersections`` counts.
     closure : Morph or None
         With ``cycle=True``: the morph of the last tracked frame back onto frame 0.
     closure_error : float or None
@@ -307,7 +308,7 @@ def _morph_frame(source: Shape, target: Shape, f: int, *, names: tuple,
     try:
         cast = along_normals(source, target) if normal else None
         if cast is not None and len(np.unique(cast, axis=0)) == len(cast) and \
-                not len(crossing_segments(cast, edges=source.edges)):
+                not _crosses_itself(cast, source):
             target = source.with_points(cast)  # node i to its own point on the polyline
             pairs = np.repeat(np.arange(source.m)[:, None], 2, axis=1)
         else:  # (normal targets that cross or coincide, open contours: nearest pairs)
@@ -563,9 +564,10 @@ def _contours_distance(a: Shape, b: Shape) -> float:
 
 
 def _crosses_itself(points: np.ndarray, first: Shape) -> bool:
-    """Whether a 2D contour (frame 0's topology on ``points``) crosses itself."""
+    """Whether a 2D contour (frame 0's topology on ``points``) folds: crosses itself
+    beyond the tracing noise that a contour as given may carry, or one contour crosses
+    another (:func:`~modalmorph.core.quality.step_crossings`, as ``Morph.self_intersections``
+    counts them)."""
     if points.shape[1] != 2 or not first.ordered:
         return False
-    if first.contours:  # each contour, and one contour across another
-        return len(crossing_segments(points, edges=first.edges)) > 0
-    return self_crossings(points, closed=first.closed) > 0
+    return bool(step_crossings([points], first)[0])
