@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .core.quality import area, curve_distances, self_crossings
+from .core.quality import area, curve_distances, self_crossings, step_crossings
 from .core.shape import Shape, resample
 from .errors import InputFileError, MorphDivergedError, OptionError
 from .io.pressure import check_pressure, frame_parts, pressure_level
@@ -76,7 +76,8 @@ class PartTrack:
     boundary_gap : ndarray, shape (F_p,)
         Largest distance of a boundary point to the nearest tracked node, mm.
     crossed : ndarray of bool, shape (F_p,)
-        Whether the tracked contour crosses itself.
+        Whether the tracked contour folds (crosses itself beyond tracing noise's tiny
+        loops, as ``Morph.self_intersections`` counts).
     start, end : str
         How it began ("appears", "merge of parts 0, 1", "split of part 2", "first
         frame") and ended ("leaves", "merges into part 4", "splits into parts 5, 6",
@@ -316,7 +317,7 @@ def _follow(c: int, chain: list, observed: list, opts: StanceOptions,
     shapes = _simple_samples(contours, max(MIN_PART_NODES, math.ceil(longest / spacing)))
     points, energy = _track_part(shapes, [f"part {c} in frame {f}" for f in frames],
                                  morph_options)
-    crossed = np.array([self_crossings(p) > 0 for p in points])
+    crossed = step_crossings(points, shapes[0]) > 0  # folds, as morphs count them
     node_d, gap = zip(*(_fit(p, b) for p, b in zip(points, contours, strict=True)),
                       strict=True)
     return PartTrack(
