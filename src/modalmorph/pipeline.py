@@ -223,7 +223,7 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
         said += (f"; the target looks like the source's mirror image (the source reflected "
                  f"fits it {matching.mirror:.3g} times better than turned): no deformation "
                  "takes a shape into its mirror image without folding it; mirror one input "
-                 "(negate its x) to compare the two")
+                 "(flip it left to right) to compare the two")
     if turned is not None:
         said += (f"; the pairs' turn of {turned.angle:.0f} deg taken as a rigid motion along "
                  f"the steps (co_rotation)")
