@@ -68,7 +68,7 @@ CO_ROTATE = 30.0
 # (every pair naming one target node): the tolerance of a Shape's "nearly one point".
 COINCIDENT = 1e-10
 # A source of fewer than half the target's nodes is said to be too coarse where the target
-# drawn through as many nodes lies this many tolerances from itself (stop.resolution_floor;
+# drawn through as many nodes lies this many tolerances from itself (stop.resolution;
 # a circle of radius 10, 200 nodes, at the default tolerance: drawn through 4 / 8 / 12 / 20
 # nodes 39 / 10 / 4.6 / 1.6 tolerances; glyph outlines as TextPath gives them, sans ->
 # serif: 'i' 4 -> 10 nodes 15, 'x' 12 -> 28 nodes 9).

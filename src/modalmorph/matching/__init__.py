@@ -592,5 +592,5 @@ def _mirror(matcher, src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions,
         return None
     ratio = r0 / r1 if r1 > 0 else np.inf
     log.debug("the target looks like the source's mirror image: the source reflected "
-                "fits it %.3g times better than turned", ratio)
+              "fits it %.3g times better than turned", ratio)
     return float(ratio)
