@@ -462,3 +462,24 @@ def test_a_source_too_coarse_for_the_target_is_said():
     assert "resample the source" in r.message
     from modalmorph.core.shape import resample
     assert "resample" not in morph(resample(square, 200), circle).message
+
+
+def test_a_source_short_of_a_finer_target_is_told_to_resample():
+    """DejaVu Sans 'f' as TextPath gives its vertices (22) onto the Serif 'f' (33): the
+    run stops short (the stem's foot of 2 nodes cannot cover a 6-node serif) and the
+    message says to resample the source; resampled to the target's count it converges."""
+    from matplotlib.font_manager import FontProperties
+    from matplotlib.textpath import TextPath
+
+    from modalmorph.core.shape import resample
+
+    def outline(face):
+        polygons = TextPath((0, 0), "f", size=10, prop=FontProperties(family=face))
+        p = max(polygons.to_polygons(), key=len)[:-1]
+        return p[np.r_[True, np.any(np.diff(p, axis=0) != 0, axis=1)]]
+
+    a, b = outline("DejaVu Sans"), outline("DejaVu Serif")
+    r = morph(a, b)
+    assert not r.converged and len(a) < len(b)
+    assert f"the source has {len(a)} nodes for the target's {len(b)}: resampled" in r.message
+    assert morph(resample(a, len(b)), b).converged

@@ -218,7 +218,8 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
         said += _unpaired(src, tgt, sim.system.partners)
     if src.dim == 3 and not src.ordered and not run.converged:
         said += unlike_sentence(pairs, src.m, tgt.m)
-    said += _coarse_source(sim.stop, run, tgt)
+    folded = crossed is not None and bool(np.any(crossed[1:] > crossed[0]))
+    said += _coarse_source(sim.stop, run, tgt, folded)
     if getattr(matching, "mirror", None):
         said += (f"; the target looks like the source's mirror image (the source reflected "
                  f"fits it {matching.mirror:.3g} times better than turned): no deformation "
@@ -233,19 +234,25 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
                  self_intersections=crossed, co_rotation=turned)
 
 
-def _coarse_source(stop, run, target: Shape) -> str:
-    """What the message adds where the source has too few nodes to follow the target (a
-    4-node rectangle onto a circle): fewer than half the target's, and the target drawn
-    through as many nodes spread along it, which the stop test allows
-    (``stop.resolution``), lies more than ``COARSE_SOURCE`` tolerances from it; for
-    shapes of several contours, of the partner contours where that is largest."""
+def _coarse_source(stop, run, target: Shape, folded: bool) -> str:
+    """What the message adds where the source may have too few nodes to follow the target
+    (``stop.resolution``; for shapes of several contours, of the partner contours where
+    the target drawn through the source's node count lies farthest from itself): where
+    it has fewer than half the target's nodes and that allowance of the stop test exceeds
+    ``COARSE_SOURCE`` tolerances (a 4-node rectangle onto a circle), or fewer nodes than
+    the target and the run stopped short or folded (raw glyph outlines of 8-22 vertices
+    onto serif ones of 16-33: resampled to the target's count, 6 of 8 converge)."""
     floor, m, n, partners = stop.resolution
-    if not (2 * m < n and floor > COARSE_SOURCE * stop.tolerance):
+    coarse = 2 * m < n and floor > COARSE_SOURCE * stop.tolerance
+    if not (coarse or (m < n and (folded or not run.converged))):
         return ""
-    unit = "input units" if target.frame is None else target.frame.unit
-    floor *= run.tolerance / stop.tolerance
     src, tgt = ("the source", "the target's") if partners is None else \
         (f"source contour {partners[0]}", f"target contour {partners[1]}'s")
+    if not coarse:
+        return (f"; {src} has {m} nodes for {tgt} {n}: resampled to more nodes (as many "
+                "as the target's, evenly spaced) it may follow the target closer")
+    unit = "input units" if target.frame is None else target.frame.unit
+    floor *= run.tolerance / stop.tolerance
     return (f"; {src} has {m} nodes for {tgt} {n}: drawn through {m} nodes spread along "
             f"it, the target lies {floor:.3g} {unit} from itself on average, which the stop "
             "test allows; resample the source to more nodes to follow the target closer")
