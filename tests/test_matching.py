@@ -1,6 +1,7 @@
 """Modal matching (method.md §2): exactness, invariance, m != n, 3D, open contours, errors."""
 
 import itertools
+import json
 
 import numpy as np
 import pytest
@@ -509,9 +510,9 @@ def test_searches_compile_uncached_with_one_warning_where_no_cache_can_be_writte
 
 
 def test_a_mirror_image_is_found_and_said():
-    """An asymmetric outline (DejaVu Sans 'b') onto its mirror image, turned, of another
-    font (a Serif 'b' mirrored: a 'd'): Matching.mirror says how much better the source
-    reflected fits (> MIRROR), the morph's message and result say so; onto the Serif 'b'
+    """An asymmetric outline (DejaVu Sans 'd') onto its mirror image, turned, of another
+    font (a Serif 'd' mirrored: a 'b'): Matching.mirror says how much nearer the source
+    reflected fits (> MIRROR), the morph's message and result say so; onto the Serif 'd'
     as it is, and with rotation="none", nothing is said."""
     from matplotlib.font_manager import FontProperties
     from matplotlib.textpath import TextPath
@@ -521,7 +522,7 @@ def test_a_mirror_image_is_found_and_said():
     from modalmorph.matching import MIRROR
 
     def outline(face):
-        polygons = TextPath((0, 0), "b", size=10, prop=FontProperties(family=face))
+        polygons = TextPath((0, 0), "d", size=10, prop=FontProperties(family=face))
         return resample(np.asarray(max(polygons.to_polygons(), key=len)[:-1], float), 100)
 
     a, b = outline("DejaVu Sans"), outline("DejaVu Serif")
@@ -533,3 +534,26 @@ def test_a_mirror_image_is_found_and_said():
     assert "the target looks like the source's mirror image" in r.message
     assert result_summary(r)["mirror"] == pytest.approx(found.mirror)
     assert match(a, b).mirror is None and match(a, d, rotation="none").mirror is None
+
+
+def test_an_exact_mirror_image_is_said_and_written(tmp_path):
+    """An L of 6 integer nodes onto its exact mirror image: the reflected source fits
+    with no gap at all; the ratio is capped (1 / MIRROR_EXACT), the message says
+    'exactly' and the result is written (JSON allows no inf). Inside a shape of two
+    contours, the largest contours' mirror image is said too."""
+    from modalmorph import morph
+    from modalmorph.io.results import save_result
+    from modalmorph.matching import MIRROR_EXACT
+
+    ell = np.array([[0, 0], [4, 0], [4, 1], [1, 1], [1, 6], [0, 6]], float)
+    r = morph(ell, ell * [-1.0, 1.0])
+    assert r.matching.mirror == pytest.approx(1 / MIRROR_EXACT)
+    assert "the source reflected fits it exactly" in r.message
+    save_result(r, tmp_path / "out")
+    assert json.loads((tmp_path / "out" / "result.json").read_text())["mirror"] > 1e8
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    hole = np.c_[2.5 + 0.3 * np.cos(t), 0.5 + 0.3 * np.sin(t)][::-1]
+    ring = resample(ell, 120)
+    two = Shape(np.r_[ring, hole], contours=(120, 40))
+    flipped = Shape(np.r_[ring, hole] * [-1.0, 1.0], contours=(120, 40))
+    assert match(two, flipped).mirror is not None

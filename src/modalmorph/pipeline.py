@@ -47,7 +47,7 @@ from .core.quality import check_contours, step_crossings
 from .core.shape import Shape, as_shape
 from .core.surfaces import intersection_sentence, step_self_intersections, unlike_sentence
 from .errors import MorphDivergedError, OptionError, ShapeError
-from .matching import Matching, match
+from .matching import MIRROR_EXACT, Matching, match
 from .matching.contours import unpaired_sentence
 from .options import MatchOptions, MorphOptions, split_overrides
 from .simulation import SPARSE_MODES, Run, Simulation
@@ -73,6 +73,11 @@ COINCIDENT = 1e-10
 # nodes 39 / 10 / 4.6 / 1.6 tolerances; glyph outlines as TextPath gives them, sans ->
 # serif: 'i' 4 -> 10 nodes 15, 'x' 12 -> 28 nodes 9).
 COARSE_SOURCE = 2.0
+# A source with at most this fraction of the target's nodes, whose run stops short or
+# folds, is told that resampled it may follow closer: raw glyphs N T f r x Y, 8-22 nodes
+# onto 16-33 (0.43-0.76), converge resampled to the target's count; at 199 onto 200 nodes
+# the advice would be idle.
+SHORT_SOURCE = 0.8
 
 log = logging.getLogger(__name__)
 
@@ -220,11 +225,7 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
         said += unlike_sentence(pairs, src.m, tgt.m)
     folded = crossed is not None and bool(np.any(crossed[1:] > crossed[0]))
     said += _coarse_source(sim.stop, run, tgt, folded)
-    if getattr(matching, "mirror", None):
-        said += (f"; the target looks like the source's mirror image (the source reflected "
-                 f"fits it {matching.mirror:.3g} times better than turned): no deformation "
-                 "takes a shape into its mirror image without folding it; mirror one input "
-                 "(flip it left to right) to compare the two")
+    said += _mirror_sentence(getattr(matching, "mirror", None))
     if turned is not None:
         said += (f"; the pairs' turn of {turned.angle:.0f} deg taken as a rigid motion along "
                  f"the steps (co_rotation)")
@@ -240,11 +241,12 @@ def _coarse_source(stop, run, target: Shape, folded: bool) -> str:
     the target drawn through the source's node count lies farthest from itself): where
     it has fewer than half the target's nodes and that allowance of the stop test exceeds
     ``COARSE_SOURCE`` tolerances (a 4-node rectangle onto a circle), or fewer nodes than
-    the target and the run stopped short or folded (raw glyph outlines of 8-22 vertices
-    onto serif ones of 16-33: resampled to the target's count, 6 of 8 converge)."""
+    the target (at most ``SHORT_SOURCE`` of them) and the run stopped short or folded
+    (raw glyph outlines of 8-22 vertices onto serif ones of 16-33: resampled to the
+    target's count, 6 of 8 converge)."""
     floor, m, n, partners = stop.resolution
     coarse = 2 * m < n and floor > COARSE_SOURCE * stop.tolerance
-    if not (coarse or (m < n and (folded or not run.converged))):
+    if not (coarse or (m <= SHORT_SOURCE * n and (folded or not run.converged))):
         return ""
     src, tgt = ("the source", "the target's") if partners is None else \
         (f"source contour {partners[0]}", f"target contour {partners[1]}'s")
@@ -256,6 +258,18 @@ def _coarse_source(stop, run, target: Shape, folded: bool) -> str:
     return (f"; {src} has {m} nodes for {tgt} {n}: drawn through {m} nodes spread along "
             f"it, the target lies {floor:.3g} {unit} from itself on average, which the stop "
             "test allows; resample the source to more nodes to follow the target closer")
+
+
+def _mirror_sentence(mirror: float | None) -> str:
+    """What the message adds where the target looks like the source's mirror image
+    (:attr:`Matching.mirror`)."""
+    if not mirror:
+        return ""
+    how = "exactly" if mirror * MIRROR_EXACT > 0.5 else f"{mirror:.3g} times nearer"
+    return (f"; the target looks like the source's mirror image (the source reflected fits "
+            f"it {how}): no rotation takes a shape into its mirror image, so the pairs join "
+            "unlike parts and the deformation is large; to compare the two shapes, mirror "
+            "one input (flip it left to right)")
 
 
 def _pairs_similarity(a: np.ndarray, b: np.ndarray) -> Similarity | None:

@@ -43,7 +43,6 @@ the rest, in the order of the default search:
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass, replace
 from functools import partial
 
@@ -70,13 +69,13 @@ from .features import (
     modal_features,
     prepare,
 )
+from .mirror import MIRROR, MIRROR_EXACT, MIRROR_SUSPECT, mirror_ratio
 from .pose import cloud_pose, contour_pose, surface_gap
 from .search import Costs, final_pairs, mutual_best, plausible
 
 __all__ = ["Matching", "match", "modal_features", "affinity", "DEFAULT_MODES",
-           "FEATURE_SIGMA", "METHODS", "ROTATIONS", "MIRROR", "MIRROR_SUSPECT"]
+           "FEATURE_SIGMA", "METHODS", "ROTATIONS", "MIRROR", "MIRROR_EXACT", "MIRROR_SUSPECT"]
 
-log = logging.getLogger(__name__)
 
 DEFAULT_MODES = 24  # modes per node (48: precision/recall 0.92/0.90 against 0.95/0.95)
 LARGE = 2000  # more nodes: matched on COARSE nodes, then refined (linear memory; not measured)
@@ -159,16 +158,6 @@ CHOICE_NODES = 10_000
 # every level: 2.00; the subsets' or the refinement's first level alone: 2.00 / 2.14.
 POSE_DECAY = 0.02
 _REJECT = 16.0  # pairs costing more are dropped: 4 target spacings (not measured)
-# A 2D contour's target is its mirror image (a left hand, a right one) where its pairs fit a
-# similarity badly, leaving more than MIRROR_SUSPECT of the target's RMS radius (the shared
-# hearts' ED -> ES <= 0.151, hands 1590 / 250 nodes <= 0.049 / 0.129, DejaVu Sans -> Serif
-# glyphs at 100 nodes 95th percentile 0.146, max 0.189), and the source reflected, matched
-# again, fits MIRROR times better. The ratio on those pairs as given: at most 1.99 (hearts,
-# near-symmetric), glyphs 1.91, hands 1.31; onto their mirror images the horse 4.2-8.7 (and
-# exact copies ~1e14), 17 of 62 glyphs 3.1-8.0 (b, d, g, p, q, S, Z, 2-9: the asymmetric),
-# the hands 0.7-3.0 (a hand's mirror image turned fits its fingers nearly as well).
-MIRROR_SUSPECT = 0.15
-MIRROR = 3.0
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -202,12 +191,12 @@ class Matching:
         contour)`` per row (every pair joins partners; contours in no row are
         unmatched); None when both objects are one contour (or no contour).
     mirror : float or None
-        For ``"auto"`` on two 2D contours not held in one frame (``rotation`` not
-        ``"none"``): where the target looks like the source's mirror image, how many
-        times better the source reflected fits it than the pairs found (the similarity's
-        residual; more than ``MIRROR``); None otherwise. The pairs stay those of the
-        source as given: no deformation takes a shape into its mirror image without
-        folding it.
+        For ``"auto"`` on 2D contours not held in one frame (``rotation`` not ``"none"``):
+        where the target looks like the source's mirror image, how many times nearer
+        the source reflected and matched again lies to it than the source placed by the
+        pairs found (more than ``MIRROR``; at most ``1 / MIRROR_EXACT``, an exact mirror
+        image); None otherwise. The pairs stay those of the source as given: no rotation
+        takes a shape into its mirror image, so they join unlike parts.
     """
 
     pairs: np.ndarray
@@ -480,8 +469,9 @@ def _match_several(src: Shape, tgt: Shape, opts: MatchOptions) -> Matching:
     if not (src.ordered and tgt.ordered):
         raise ShapeError("an object of several contours is matched with another ordered "
                          "object (contours), not with a point set or a surface")
+    mirror = None
     if opts.method == "auto":
-        pairs, cost, sim, partners = match_contours(
+        pairs, cost, sim, partners, mirror = match_contours(
             src, tgt, opts.rotation, partial(match, options=opts))
         n_modes = DEFAULT_MODES if opts.modes is None else int(opts.modes)
     else:
@@ -495,7 +485,7 @@ def _match_several(src: Shape, tgt: Shape, opts: MatchOptions) -> Matching:
     order = np.argsort(pairs[:, 0], kind="stable")
     return Matching(pairs=pairs[order].astype(np.intp), cost=cost[order], method=opts.method,
                     modes=n_modes, sigma=opts.sigma, similarity=sim, nodes=(src.m, tgt.m),
-                    options=opts, contours=partners)
+                    options=opts, contours=partners, mirror=mirror)
 
 
 def _shapes(source, target) -> tuple[Shape, Shape]:
@@ -564,33 +554,9 @@ def match(source, target, *, options: MatchOptions | None = None, **overrides) -
         else:
             matcher = _match_large if max(src.m, tgt.m) > LARGE else _match_auto
             pairs, cost, sim, _ = matcher(src, tgt, n_modes, opts)
-            mirror = _mirror(matcher, src, tgt, n_modes, opts, pairs, sim) \
-                if src.dim == 2 and opts.rotation != "none" else None
+            mirror = mirror_ratio(partial(matcher, n_modes=n_modes), src, tgt, opts, sim) \
+                if src.dim == 2 and src.ordered and opts.rotation != "none" else None
     order = np.argsort(pairs[:, 0], kind="stable")
     return Matching(pairs=pairs[order].astype(np.intp), cost=cost[order], method=opts.method,
                     modes=n_modes, sigma=opts.sigma, similarity=sim, nodes=(src.m, tgt.m),
                     options=opts, mirror=mirror)
-
-
-def _residual(x: np.ndarray, y: np.ndarray, sim: Similarity) -> float:
-    """The RMS distance between ``sim(x)`` and ``y`` over the RMS radius of ``y``."""
-    return float(np.sqrt(np.sum((sim.apply(x) - y) ** 2) / np.sum((y - y.mean(axis=0)) ** 2)))
-
-
-def _mirror(matcher, src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions,
-            pairs: np.ndarray, sim: Similarity) -> float | None:
-    """:attr:`Matching.mirror`: where the pairs found fit their similarity worse than
-    ``MIRROR_SUSPECT``, the source reflected (x -> -x) is matched again, and the ratio of
-    the two residuals returned where it exceeds ``MIRROR``; else None."""
-    r0 = _residual(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]], sim)
-    if not r0 > MIRROR_SUSPECT:
-        return None
-    ref = src.with_points(src.points * [-1.0, 1.0])
-    p1, _, s1, _ = matcher(ref, tgt, n_modes, opts)
-    r1 = _residual(ref.points[p1[:, 0]], tgt.points[p1[:, 1]], s1)
-    if not r0 > MIRROR * r1:
-        return None
-    ratio = r0 / r1 if r1 > 0 else np.inf
-    log.debug("the target looks like the source's mirror image: the source reflected "
-              "fits it %.3g times better than turned", ratio)
-    return float(ratio)

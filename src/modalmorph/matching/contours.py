@@ -84,13 +84,16 @@ def largest(shape: Shape) -> int:
                           for r in shape.slices]))
 
 
-def object_pose(src: Shape, tgt: Shape, rotation: str, match_one: Callable) -> Similarity:
+def object_pose(src: Shape, tgt: Shape, rotation: str, match_one: Callable
+                ) -> tuple[Similarity, float | None]:
     """The pose of the whole source: Horn's similarity of the pairs the ordered matcher
     finds between the largest contour of each object (``match_one(a, b)`` returns a
-    Matching), with the caller's ``rotation``; no rotation with ``rotation="none"``."""
+    Matching), with the caller's ``rotation``; no rotation with ``rotation="none"``.
+    Also that match's ``mirror`` (the largest contours' mirror images)."""
     a, b = src.contour(largest(src)), tgt.contour(largest(tgt))
-    found = match_one(a, b).pairs
-    return align(a.points[found[:, 0]], b.points[found[:, 1]], rotate=rotation != "none")
+    found = match_one(a, b)
+    return (align(a.points[found.pairs[:, 0]], b.points[found.pairs[:, 1]],
+                  rotate=rotation != "none"), found.mirror)
 
 
 def match_contours(src: Shape, tgt: Shape, rotation: str, match_one: Callable):
@@ -98,10 +101,10 @@ def match_contours(src: Shape, tgt: Shape, rotation: str, match_one: Callable):
 
     ``match_one(a, b, **options)`` is :func:`modalmorph.match` (passed in: this module
     sits below it). Returns the pairs (K, 2) in the rows of the whole objects, their
-    costs (K,), the similarity placing the source (Horn on all the pairs) and the
-    partner contours (P, 2).
+    costs (K,), the similarity placing the source (Horn on all the pairs), the partner
+    contours (P, 2) and the largest contours' ``Matching.mirror``.
     """
-    pose = object_pose(src, tgt, rotation, match_one)
+    pose, mirror = object_pose(src, tgt, rotation, match_one)
     placed = pose.apply(src.points)
     partners = pair_contours(src, tgt, placed)
     pairs, cost = [], []
@@ -116,7 +119,7 @@ def match_contours(src: Shape, tgt: Shape, rotation: str, match_one: Callable):
     if said:
         log.info("match: %s", said)
     sim = align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]])
-    return pairs, cost, sim, partners
+    return pairs, cost, sim, partners, mirror
 
 
 def unpaired_sentence(src: Shape, tgt: Shape, partners: np.ndarray,
