@@ -93,7 +93,7 @@ COARSE_NODES = 1000
 # Relative residual below which a mode counts as converged (see the module's docstring
 # for what it means for the frequencies, measured against the exact solvers).
 MULTILEVEL_TOL = 5e-2
-# LOBPCG iterations at most (100k random ellipsoid points need 34; method.md §7).
+# LOBPCG iterations at most (100k random ellipsoid points need 20; method.md §7).
 MULTILEVEL_MAXITER = 100
 # Nodes per preconditioner patch: dense (d * 32)^2 inverses, 9 * 32 doubles per
 # 3D node in all (0.23 GB at 100k nodes).
