@@ -13,7 +13,10 @@ only multiplies by the full model's sparse matrices:
 2. **Rayleigh-Ritz** with the full model's ``K_g`` and ``M_g = rho (I kron Gamma)``.
 3. **LOBPCG** (Knyazev's locally optimal block preconditioned conjugate gradient) on
    ``K_g psi = w^2 M_g psi`` with a block of ``k > n`` vectors, preconditioned by exact
-   solves with ``K_g`` restricted to small patches of neighbouring nodes (block Jacobi),
+   solves ``P`` with ``K_g`` restricted to small patches of neighbouring nodes (block
+   Jacobi) and one damped Richardson step ``w = P r + omega P (r - K_g P r)`` (``omega``
+   from a Lanczos estimate of the largest eigenvalue of ``P K_g``, so that the step's
+   polynomial stays positive: 34 -> 20 iterations on 100 000 random ellipsoid points),
    until every wanted mode's relative residual
    ``||K_g psi - w^2 M_g psi|| / (w^2 ||M_g psi||)`` is below ``tol``, for as long as
    the largest of them keeps falling (at most ``maxiter`` iterations): the block
@@ -43,9 +46,9 @@ Measured (``benchmarks/scale.py``, 2 cores, ``OPENBLAS_NUM_THREADS=1``): 100k 3D
 62 s and 4.9 GB with the BSR ``K_g`` and one thread. Nodes drawn at random are harder:
 the lowest modes are localised where the nodes crowd, hundreds of frequencies lie within a
 few percent, neither the smooth coarse start nor the patch preconditioner sees them, and
-LOBPCG needs some 30 iterations (``benchmarks/multilevel.py``: 100k random points on an
-ellipsoid, 34 iterations, 64 s with one thread on a quiet machine, 2.3 GB; the frequencies are
-within 8.6e-3 of the exact solver's at 2500 such nodes, median 3.9e-3). Measured at
+LOBPCG needs some 20 iterations (``benchmarks/multilevel.py``: 100k random points on an
+ellipsoid, 20 iterations, 54 CPU-s with one thread at load 5, 2.5 GB; the frequencies are
+within 8.6e-3 of the exact solver's at 2500 such nodes). Measured at
 20 000 random nodes on the ellipsoid and not kept (docs/issue25/scale.md): 50 guard
 vectors instead of 12 (22 iterations instead of 28) and 64-node patches (23) take longer
 in all; a shift in the
@@ -90,7 +93,7 @@ COARSE_NODES = 1000
 # Relative residual below which a mode counts as converged (see the module's docstring
 # for what it means for the frequencies, measured against the exact solvers).
 MULTILEVEL_TOL = 5e-2
-# LOBPCG iterations at most (100k random ellipsoid points need 34; method.md §7).
+# LOBPCG iterations at most (100k random ellipsoid points need 20; method.md §7).
 MULTILEVEL_MAXITER = 100
 # Nodes per preconditioner patch: dense (d * 32)^2 inverses, 9 * 32 doubles per
 # 3D node in all (0.23 GB at 100k nodes).
@@ -105,6 +108,17 @@ _SPARSE_ROWS = 8192
 # solver's order, so close together: 256 of 100 000 random ellipsoid points meet 348 of
 # 1000 coarse nodes on average; 0.40 s for all, 1024 points per chunk 0.59 s).
 _FIELD_CHUNK = 256
+# The Richardson step after the patch solves: omega = _RICHARDSON_ROOT / (top - 1), top
+# the estimate of P K_g's largest eigenvalue, so that the step's polynomial
+# 1 + omega (1 - t) falls to 1 - _RICHARDSON_ROOT at t = top (top 4.0-4.05 on random
+# ellipsoid points, 3.6-5.5 on other clouds). 100 000 ellipsoid points, one thread: 34
+# iterations without the step, 25 with omega = 0.29 (1 - 0.88), 19-20 with 0.318 (this
+# root); 20 000: 25 without, 19 / 16 with 0.25 / 0.33; omega = 0.42 and 0.5 (the
+# polynomial negative at the top) stalled (docs/issue25/scale.md, session 14).
+_RICHARDSON_ROOT = 0.97
+# Lanczos steps of that estimate: 20 steps within 0.4% of 80 on ellipsoid, sphere, scan,
+# blob and cube clouds of 20 000-30 000 points (0.15 s at 20 000 ellipsoid points).
+_LANCZOS_STEPS = 20
 # Threads of the sparse and dense block products (2 cores; results equal to round-off).
 THREADS = 2
 
@@ -165,7 +179,7 @@ def solve(model, n: int, *, coarse_nodes: int = COARSE_NODES, tol: float = MULTI
         # dense products (BLAS) on the threads too, unless BLAS runs threads of its own:
         # concurrent calls into a multithreaded OpenBLAS are several times slower
         dense = threads if _blas_single_threaded() else 1
-        precondition = _patch_preconditioner(model, order, pool, dense)
+        precondition = _preconditioner(model, order, ops, pool, dense)
         clock("preconditioner")
         w2, psi, res, its = lobpcg(ops, precondition, start, n, tol, maxiter,
                                     Rows(pool, dense, d * m), clock)
@@ -410,11 +424,11 @@ def _chunks(x, r0, bptr, bidx):
 
 def _patch_preconditioner(model, order: np.ndarray, pool: ThreadPoolExecutor,
                           threads: int):
-    """Block Jacobi: exact solves with ``K_g`` restricted to patches of ``_PATCH_NODES``
-    consecutive nodes of the solver's order (leaves of a k-d tree, so neighbours), on
-    component-major blocks. Each patch's inverse ``A^-1 = L^-T L^-1`` (from its Cholesky
-    factor) is stored and the solves are batched products ``A^-1 R``, batches of patches over the
-    threads."""
+    """Block Jacobi ``P``: exact solves with ``K_g`` restricted to patches of
+    ``_PATCH_NODES`` consecutive nodes of the solver's order (leaves of a k-d tree, so
+    neighbours), on component-major blocks. Each patch's inverse ``A^-1 = L^-T L^-1`` (from
+    its Cholesky factor) is stored and the solves are batched products ``A^-1 R``, batches
+    of patches over the threads."""
     d, m = model.dim, model.m
     lam, mu = model.lame
     x = model.points[order]
@@ -456,5 +470,69 @@ def _patch_preconditioner(model, order: np.ndarray, pool: ThreadPoolExecutor,
             r = Rs[:, full * P:][..., cols].reshape(-1, k)
             out[:, full * P:] = (last @ r).reshape(d, m - full * P, k)
         return out.reshape(-1, k)
+
+    return apply
+
+
+def _preconditioner(model, order: np.ndarray, ops: Operators, pool: ThreadPoolExecutor,
+                    threads: int):
+    """The patch solves ``P`` (:func:`_patch_preconditioner`) and one Richardson step
+    (:func:`_richardson`) with ``omega = _RICHARDSON_ROOT / (top - 1)``, ``top`` the
+    Lanczos estimate of the largest eigenvalue of ``P K_g``; the patch solves alone when
+    that is 1 (one patch: ``P K_g = I``, the step adds nothing)."""
+    patches = _patch_preconditioner(model, order, pool, threads)
+    top = _top_eigenvalue(ops, patches, _LANCZOS_STEPS)
+    if top <= 1 + 1e-6:
+        return patches
+    return _richardson(patches, ops, _RICHARDSON_ROOT / (top - 1))
+
+
+def _top_eigenvalue(ops: Operators, patches, steps: int) -> float:
+    """An estimate (from below) of the largest eigenvalue of ``P K_g`` (``patches``: the
+    solves ``P``), self-adjoint in the inner product ``<x, y> = x^T K_g y``: ``steps``
+    steps of Lanczos in that inner product from a fixed random vector, one product with
+    ``K_g`` and one solve each (single columns: 100 000 nodes, 0.04 s a step)."""
+    v = np.random.default_rng(0).standard_normal((ops.d * ops.m, 1))
+    Kv = ops.stiffness(v)
+    norm = np.sqrt(float(np.vdot(v, Kv)))
+    v, Kv = v / norm, Kv / norm
+    prev = np.zeros_like(v)
+    alphas, betas = [], [0.0]
+    for _ in range(steps):
+        u = patches(Kv, slice(None), np.empty_like(v))
+        alphas.append(float(np.vdot(Kv, u)))
+        u -= alphas[-1] * v + betas[-1] * prev
+        Ku = ops.stiffness(u)
+        beta = np.sqrt(max(float(np.vdot(u, Ku)), 0.0))
+        if beta <= 1e-12 * abs(alphas[-1]):
+            break
+        prev, v, Kv = v, u / beta, Ku / beta
+        betas.append(beta)
+    return float(linalg.eigvalsh_tridiagonal(np.array(alphas), np.array(betas[1:len(alphas)]),
+                                             select="i", select_range=(len(alphas) - 1,
+                                                                       len(alphas) - 1))[0])
+
+
+def _richardson(patches, ops: Operators, omega: float):
+    """The patch solves ``P`` and one damped Richardson step on ``K_g w = r``:
+    ``w = P r + omega P (r - K_g P r)``, the polynomial ``(1 + omega (1 - t)) P`` of
+    ``t = P K_g``, positive while ``t < 1 + 1 / omega``. Its two work blocks are made once
+    and reused."""
+    buffers = {}
+
+    def buffer(name: str, shape) -> np.ndarray:
+        size = shape[0] * shape[1]
+        if name not in buffers or buffers[name].size < size:
+            buffers[name] = np.empty(size)
+        return buffers[name][:size].reshape(shape)
+
+    def apply(R: np.ndarray, cols, out: np.ndarray) -> np.ndarray:
+        W = patches(R, cols, out)
+        T = ops.stiffness(W, buffer("T", W.shape))
+        np.subtract(R[:, cols], T, out=T)
+        U = patches(T, slice(None), buffer("U", W.shape))
+        U *= omega
+        W += U
+        return W
 
     return apply
