@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from modalmorph.core import quality
 from modalmorph.core.align import Similarity
 from modalmorph.core.quality import (
     area,
@@ -11,8 +12,9 @@ from modalmorph.core.quality import (
     curve_distances,
     roughness,
     self_crossings,
+    step_crossings,
 )
-from modalmorph.core.shape import resample
+from modalmorph.core.shape import Shape, resample
 
 from .conftest import random_rotation, self_intersections
 
@@ -115,6 +117,29 @@ def test_self_crossings_touching_does_not_count():
     # a bow tie whose two loops touch at one node of a non-adjacent segment
     p = np.array([[0, 0], [2, 0], [1, 0], [1, 1]])  # node 2 lies on segment 0
     assert self_crossings(p, closed=False) == 0
+
+
+@pytest.mark.parametrize("segments", [20_000, 50])
+def test_step_crossings_as_one_sweep_a_step(rng, monkeypatch, segments):
+    """The steps swept together count what crossing_segments finds step by step: random
+    walks that cross often, coordinates rounded to ties and collinear overlaps, one or
+    two contours, open or closed; also swept a few steps at a time."""
+    monkeypatch.setattr(quality, "_STEP_SEGMENTS", segments)
+    folded = 0
+    for trial in range(60):
+        m, steps = int(rng.integers(9, 60)), int(rng.integers(1, 9))
+        t = np.linspace(0, 2 * np.pi, m, endpoint=False)
+        base = np.c_[np.cos(t), np.sin(t)]
+        shapes = base + rng.normal(0, [0.05, 0.3, 1.0][trial % 3], (steps, m, 2))
+        if trial % 2:
+            shapes = np.round(shapes, 1)  # ties and touching segments
+        k = m // 3
+        shape = Shape(base, closed=trial % 4 != 1, contours=(k, m - k)) if trial % 5 == 0 \
+            else Shape(base, closed=trial % 4 != 1)
+        each = [len(quality.crossing_segments(p, edges=shape.edges)) for p in shapes]
+        assert step_crossings(shapes, shape).tolist() == each
+        folded += sum(each) > 0
+    assert folded >= 30  # most of the noisier steps cross (the test tests something)
 
 
 def test_roughness_invariant_to_pose_and_scale(hand200, rng):
