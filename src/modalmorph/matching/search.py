@@ -13,6 +13,7 @@ which go round a closed target once).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -139,6 +140,12 @@ class Costs:
     repeat: float = np.inf
     many: bool = False
 
+    @cached_property
+    def yy(self) -> np.ndarray:
+        """The target nodes' squared norms (n,), as ``sq_dist`` sums them (made once for
+        the alternation's rounds)."""
+        return np.add.reduce(self.y**2, axis=1)
+
 
 def pairs_at(costs: Costs, z: np.ndarray, rows: np.ndarray):
     """Pairs (row index, target index) for the source nodes ``rows`` (distinct, ascending)
@@ -148,8 +155,8 @@ def pairs_at(costs: Costs, z: np.ndarray, rows: np.ndarray):
     x, y = z[rows], costs.y
     if costs.ordered:
         from ._dp import placed_search
-        xx, yy = np.add.reduce(x**2, axis=1), np.add.reduce(y**2, axis=1)  # as sq_dist
-        j, cost = placed_search(xx, yy, 2 * x @ y.T, costs.F, np.asarray(rows, np.intp),
+        xx = np.add.reduce(x**2, axis=1)  # as sq_dist
+        j, cost = placed_search(xx, costs.yy, 2 * x @ y.T, costs.F, np.asarray(rows, np.intp),
                                 float(costs.h2), (SKIP, float(costs.repeat), bool(costs.closed)))
         return _pairs_from_j(j, cost, one_to_one=not costs.many)
     C = sq_dist(x, y) / costs.h2 + costs.F[rows]
