@@ -119,7 +119,7 @@ def test_self_crossings_touching_does_not_count():
     assert self_crossings(p, closed=False) == 0
 
 
-@pytest.mark.parametrize("segments", [20_000, 50])
+@pytest.mark.parametrize("segments", [4000, 50])
 def test_step_crossings_as_one_sweep_a_step(rng, monkeypatch, segments):
     """The steps swept together count what crossing_segments finds step by step: random
     walks that cross often, coordinates rounded to ties and collinear overlaps, one or

@@ -307,22 +307,30 @@ def _check_contours(shape, name: str) -> None:
 def step_crossings(shapes, shape) -> np.ndarray:
     """The pairs of segments that cross (:func:`crossing_segments`, within a contour or
     between two) of a 2D ordered :class:`Shape`'s topology on the nodes of every step,
-    shape (T+1,), int: a contour folded through itself shows there. The steps are swept
-    together, :data:`_STEP_SEGMENTS` segments at a time (the same candidate pairs and
-    tests as :func:`crossing_segments`, one call a step before: 70 nodes, 6 steps, 0.33
-    -> 0.10 ms); one pass over the segment pairs that overlap at any step instead took
-    24 ms at 250 nodes and 4 s at 1000 for a half turn, which sweeps the shape over
-    itself."""
+    shape (T+1,), int: a contour folded through itself shows there. Up to
+    :data:`_SWEPT_TOGETHER` segments, the steps are swept together,
+    :data:`_STEP_SEGMENTS` segments at a time (the same candidate pairs and tests as
+    :func:`crossing_segments`, which runs once a step above); one pass over the segment
+    pairs that overlap at any step instead took 24 ms at 250 nodes and 4 s at 1000 for a
+    half turn, which sweeps the shape over itself."""
     edges = np.asarray(shape.edges, dtype=np.intp)
+    if len(edges) > _SWEPT_TOGETHER:
+        return np.array([len(crossing_segments(points, edges=edges)) for points in shapes],
+                        dtype=np.int64)
     p = np.asarray(shapes, dtype=np.float64)
     per = max(1, _STEP_SEGMENTS // max(len(edges), 1))  # steps swept together
     return np.concatenate([_steps_crossed(p[s:s + per], edges)
                            for s in range(0, len(p), per)] or [np.zeros(0, np.int64)])
 
 
-# Segments x steps swept at once by step_crossings (its candidate pairs, a few per
-# segment for a contour that does not fold, stay well under crossing_segments' _CHUNK).
-_STEP_SEGMENTS = 20_000
+# step_crossings sweeps the steps together up to this many segments, this many segments
+# x steps at a time: a heart pair's straight path, one thread, against one
+# crossing_segments a step: 70 nodes, 6 steps 0.38 -> 0.09 ms; 250, 12 steps 0.95 ->
+# 0.32; 500, 15 steps 1.49 -> 0.94; 700 nodes 1.67 -> 1.46; 1000 nodes 2.9 -> 2.8-3.7
+# (batches of 4000: 0.5-3.7 ms, of 20 000: 5.8 ms): above, a step at a time. At most
+# 4000 segments have ~8 million pairs; at most 600 a step, 6 steps of every pair
+# overlapping (a horizontal zigzag) are ~1 million candidates, crossing_segments' _CHUNK.
+_SWEPT_TOGETHER, _STEP_SEGMENTS = 600, 4000
 
 
 def _steps_crossed(p: np.ndarray, edges: np.ndarray) -> np.ndarray:
