@@ -327,9 +327,9 @@ def step_crossings(shapes, shape) -> np.ndarray:
 # x steps at a time: a heart pair's straight path, one thread, against one
 # crossing_segments a step: 70 nodes, 6 steps 0.38 -> 0.09 ms; 250, 12 steps 0.95 ->
 # 0.32; 500, 15 steps 1.49 -> 0.94; 700 nodes 1.67 -> 1.46; 1000 nodes 2.9 -> 2.8-3.7
-# (batches of 4000: 0.5-3.7 ms, of 20 000: 5.8 ms): above, a step at a time. At most
-# 4000 segments have ~8 million pairs; at most 600 a step, 6 steps of every pair
-# overlapping (a horizontal zigzag) are ~1 million candidates, crossing_segments' _CHUNK.
+# (batches of 4000: 0.5-3.7 ms, of 20 000: 5.8 ms): above, a step at a time. With at
+# most 600 a step, 6 steps of every pair overlapping (a horizontal zigzag) are ~1 million
+# candidates, crossing_segments' _CHUNK.
 _SWEPT_TOGETHER, _STEP_SEGMENTS = 600, 4000
 
 
