@@ -83,12 +83,14 @@ class Polyline:
         r, idx = r.reshape(len(p), k), idx.reshape(len(p), k)
         # the segments on either side of each of the k nearest vertices
         seg = np.concatenate([idx, idx - 1], axis=1)
-        if self.closed:
+        if self.closed:  # every segment index valid
             seg %= n
-        valid = (seg >= 0) & (seg < n_seg)
-        seg = np.where(valid, seg, 0)
-        d = _segment_distance(p[:, None, :], start[seg], end[seg])
-        best = np.where(valid, d, np.inf).min(axis=1)
+            best = _segment_distance(p[:, None, :], start[seg], end[seg]).min(axis=1)
+        else:
+            valid = (seg >= 0) & (seg < n_seg)
+            seg = np.where(valid, seg, 0)
+            d = _segment_distance(p[:, None, :], start[seg], end[seg])
+            best = np.where(valid, d, np.inf).min(axis=1)
         # Exactness: the nearest point q of the polyline lies on a segment of length
         # L <= L_max. If q is inside it, p - q is perpendicular to it, so the nearer end e
         # has |p - e|^2 = |p - q|^2 + |q - e|^2 <= best^2 + L_max^2 / 4 (q at an end:
