@@ -116,7 +116,9 @@ def _pairs_from_j(j: np.ndarray, cost: np.ndarray, one_to_one: bool):
     the pair's cost ``cost`` (m,) of every source node."""
     i = np.flatnonzero(j >= 0)
     pairs = np.stack([i, j[i]], axis=1)  # np.c_ costs 10 us more a call
-    if one_to_one and len(pairs):  # a cyclic search may reuse a target once across the cut
+    # a cyclic search may reuse a target once across the cut (rarely: a count finds it,
+    # 10 us against the stable sort and unique's 50 at 70 nodes)
+    if one_to_one and len(pairs) and np.bincount(pairs[:, 1]).max() > 1:
         order = np.argsort(cost[i], kind="stable")
         _, first = np.unique(pairs[order, 1], return_index=True)
         pairs = pairs[np.sort(order[first])]
