@@ -212,7 +212,7 @@ def crossing_segments(points, closed: bool = True, *, edges=None) -> np.ndarray:
     m = len(p)
     if edges is None:
         i = np.arange(m if closed else m - 1)
-        edges = np.c_[i, (i + 1) % m]
+        edges = np.stack([i, (i + 1) % m], axis=1)
     edges = np.asarray(edges, dtype=np.intp)
     a, b = p[edges[:, 0]], p[edges[:, 1]]
     lo_x, hi_x = np.minimum(a[:, 0], b[:, 0]), np.maximum(a[:, 0], b[:, 0])
