@@ -111,11 +111,19 @@ def _untangle(t: np.ndarray, cost: np.ndarray, n: int, skip: float, strict: bool
         keep[end if loss_end <= loss_start else start] = False
 
 
+def _columns(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.stack([a, b], axis=1)`` of two index arrays, (k, 2) intp (3 us against
+    np.stack's 7 and np.c_'s 17: 16 calls a match)."""
+    out = np.empty((len(a), 2), dtype=np.intp)
+    out[:, 0], out[:, 1] = a, b
+    return out
+
+
 def _pairs_from_j(j: np.ndarray, cost: np.ndarray, one_to_one: bool):
     """The pairs ``(i, j[i])`` where ``j[i] >= 0`` and their costs, from the partner and
     the pair's cost ``cost`` (m,) of every source node."""
     i = np.flatnonzero(j >= 0)
-    pairs = np.stack([i, j[i]], axis=1)  # np.c_ costs 10 us more a call
+    pairs = _columns(i, j[i])
     # a cyclic search may reuse a target once across the cut (rarely: a count finds it,
     # 10 us against the stable sort and unique's 50 at 70 nodes)
     if one_to_one and len(pairs) and np.bincount(pairs[:, 1]).max() > 1:
@@ -177,7 +185,7 @@ def trusted_pairs(costs: Costs, z: np.ndarray, sub: np.ndarray):
     """Search the source nodes ``sub`` placed at ``z``: the trusted pairs (source index,
     target index) and the total cost of all pairs."""
     pairs, cost = pairs_at(costs, z, sub)
-    rows = np.stack([sub[pairs[:, 0]], pairs[:, 1]], axis=1)
+    rows = _columns(sub[pairs[:, 0]], pairs[:, 1])
     return _trusted(rows, cost, z.shape[1]), cost.sum()
 
 
