@@ -231,18 +231,23 @@ def test_auto_sigma_on_the_model_s_own_factor(hand200, monkeypatch, nominal):
     the whitening made twice is the same numbers."""
     from scipy.linalg import lapack
 
+    from modalmorph.core import model as model_module
     from modalmorph.core.element import auto_sigma
+    from modalmorph.core.solvers import dense
     from modalmorph.core.solvers.dense import whitened
 
-    calls = []
+    calls, bounds = [], []
     real = lapack.dpotrf
     monkeypatch.setattr(lapack, "dpotrf", lambda *a, **k: calls.append(1) or real(*a, **k))
+    for module in (model_module, dense):  # the condition bound, made once too
+        monkeypatch.setattr(module, "condition_bound", lambda *a, real=module.condition_bound:
+                            bounds.append(1) or real(*a))
     model = FEModel(hand200, sigma=None, nominal_sigma=nominal)
     first = whitened(model)
     monkeypatch.setattr(lapack, "dpotrf", real)
     assert model.sigma == auto_sigma(hand200, nominal)
     if nominal == 2.0:
-        assert model.sigma == nominal and len(calls) == 1
+        assert model.sigma == nominal and len(calls) == 1 and len(bounds) == 1
     else:
         assert model.sigma < nominal
     for a, b in zip(first, whitened(model), strict=True):

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
+from modalmorph.core import quality
 from modalmorph.core.align import Similarity
 from modalmorph.core.quality import (
     area,
@@ -11,6 +12,7 @@ from modalmorph.core.quality import (
     correspondence_rotation,
     crossing_segments,
     curve_distances,
+    knot_count,
     roughness,
     self_crossings,
     step_crossings,
@@ -120,6 +122,29 @@ def test_self_crossings_touching_does_not_count():
     assert self_crossings(p, closed=False) == 0
 
 
+@pytest.mark.parametrize("segments", [4000, 50])
+def test_step_crossings_as_one_sweep_a_step(rng, monkeypatch, segments):
+    """The steps swept together count what crossing_segments finds step by step: random
+    walks that cross often, coordinates rounded to ties and collinear overlaps, one or
+    two contours, open or closed; also swept a few steps at a time."""
+    monkeypatch.setattr(quality, "_STEP_SEGMENTS", segments)
+    folded = 0
+    for trial in range(60):
+        m, steps = int(rng.integers(9, 60)), int(rng.integers(1, 9))
+        t = np.linspace(0, 2 * np.pi, m, endpoint=False)
+        base = np.c_[np.cos(t), np.sin(t)]
+        shapes = base + rng.normal(0, [0.05, 0.3, 1.0][trial % 3], (steps, m, 2))
+        if trial % 2:
+            shapes = np.round(shapes, 1)  # ties and touching segments
+        k = m // 3
+        shape = Shape(base, closed=trial % 4 != 1, contours=(k, m - k)) if trial % 5 == 0 \
+            else Shape(base, closed=trial % 4 != 1)
+        each = [len(quality.crossing_segments(p, edges=shape.edges)) for p in shapes]
+        assert step_crossings(shapes, shape).tolist() == each
+        folded += sum(each) > 0
+    assert folded >= 30  # most of the noisier steps cross (the test tests something)
+
+
 def test_roughness_invariant_to_pose_and_scale(hand200, rng):
     r = roughness(hand200)
     moved = Similarity(random_rotation(2, rng), 37.0, np.array([1e3, -5.0])).apply(hand200)
@@ -199,9 +224,10 @@ def test_check_simple_accepts_the_tiny_loops_of_real_outlines():
 
 
 def test_step_crossings_counts_folds_not_tracing_knots():
-    """A knot of tracing noise (a loop of 1e-5 of the squared RMS radius, which
-    check_simple accepts) is no fold; a figure eight's lobe is one, within a contour or
-    between two."""
+    """A knot of tracing noise's size (a loop of 1e-5 of the squared RMS radius, which
+    check_simple accepts) is no fold where the inputs carry as many knots as given
+    (``knots``), and is one (two nodes swapped) on clean inputs; a figure eight's lobe
+    is one, within a contour or between two."""
     t = np.linspace(0, 2 * np.pi, 200, endpoint=False)
     circle = np.c_[np.cos(t), np.sin(t)]
     knot = circle.copy()
@@ -211,7 +237,25 @@ def test_step_crossings_counts_folds_not_tracing_knots():
     shape = Shape(circle)
     assert len(crossing_segments(knot)) == 1
     check_simple(knot, "knot")
-    assert_array_equal(step_crossings([circle, knot, eight], shape), [0, 0, 1])
+    assert knot_count(Shape(knot)) == 1 and knot_count(shape) == 0
+    assert_array_equal(step_crossings([circle, knot, eight], shape), [0, 1, 1])
+    assert_array_equal(step_crossings([circle, knot, eight], shape, knots=1), [0, 0, 1])
     two = Shape(np.r_[circle, 0.5 * circle], contours=(200, 200))
     assert_array_equal(step_crossings([two.points, np.r_[circle, 0.5 * circle + [0.8, 0]]],
                                       two), [0, 2])
+
+
+def test_long_thin_or_twisted_loops_are_folds():
+    """Loops of small area but long (a tip folded back along 6 of 10 units at 0.1 %
+    offset; lobes of opposite turn whose signed areas cancel) are folds, not noise."""
+    from modalmorph.core.quality import LOOP_LENGTH
+
+    x = np.linspace(0.0, 10.0, 101)
+    line = np.c_[x, 0.001 * np.sin(x)]
+    back = np.c_[x[::-1][1:61], -0.001 + 0.0 * x[::-1][1:61]]  # folded back
+    tip = np.r_[line, back]
+    tip[-1, 1] = 0.002  # the last segment crosses the line
+    shape = Shape(tip, closed=False)
+    if len(crossing_segments(tip, closed=False)):
+        assert step_crossings([tip], shape)[0] >= 1
+    assert LOOP_LENGTH < 1.0

@@ -129,7 +129,7 @@ class FEModel:
         if sigma is None:
             self.sigma = float(nominal_sigma)
             if not self._nominal_conditioned():
-                for name in ("width", "gram", "_gamma_factor"):  # made at the nominal sigma
+                for name in ("width", "gram", "_gamma_factor", "_gamma_bound"):  # nominal
                     self.__dict__.pop(name, None)
                 self.sigma, log_cond = auto_sigma_condition(self.shape, nominal_sigma)
                 if log_cond is not None:  # measured on the way: no second eigensolve
@@ -155,8 +155,7 @@ class FEModel:
         (kept for it, :meth:`take_gamma_factor`), not on a second one."""
         if self._solver.name != "dense" or self.dim * self.m > AUTO_DENSE_MAX_DOF:
             return False
-        _, l_inv, info = self._gamma_factor
-        return info == 0 and condition_bound(self.gram[1], l_inv) <= AUTO_CONDITION
+        return self._gamma_factor[2] == 0 and self._gamma_bound <= AUTO_CONDITION
 
     @cached_property
     def _gamma_factor(self) -> tuple[np.ndarray, np.ndarray | None, int]:
@@ -167,13 +166,19 @@ class FEModel:
             l_inv, info = lapack.dtrtri(L, lower=1)
         return L, l_inv, info
 
-    def take_gamma_factor(self) -> tuple[np.ndarray, np.ndarray | None, int]:
-        """``(L, L^-1, info)``: the lower Cholesky factor of the dense ``Gamma``, its
-        inverse (None when the factor failed) and LAPACK's ``info`` (0: both made);
-        handed over: the model keeps neither (a made one is not made twice)."""
+    @cached_property
+    def _gamma_bound(self) -> float:
+        """:func:`~modalmorph.core.element.condition_bound` of ``Gamma`` from its factor."""
+        return condition_bound(self.gram[1], self._gamma_factor[1])
+
+    def take_gamma_factor(self) -> tuple[np.ndarray, np.ndarray | None, int, float | None]:
+        """``(L, L^-1, info, bound)``: the lower Cholesky factor of the dense ``Gamma``,
+        its inverse (None when the factor failed), LAPACK's ``info`` (0: both made) and
+        the condition bound from them where already made (else None); handed over: the
+        model keeps none of them (a made one is not made twice)."""
         out = self._gamma_factor
         del self.__dict__["_gamma_factor"]
-        return out
+        return (*out, self.__dict__.pop("_gamma_bound", None))
 
     @property
     def solver(self) -> str:

@@ -17,7 +17,8 @@ from .shape import check_once, resample
 
 __all__ = ["Polyline", "area", "check_contours", "correspondence_rotation",
            "curve_distances", "roughness", "self_crossings", "crossing_segments", "LOOP_AREA",
-           "check_simple", "check_flat", "FLAT", "step_crossings"]
+           "check_simple", "check_flat", "FLAT", "step_crossings", "knot_count", "LOOP_LENGTH",
+           "KNOT_SLACK"]
 
 # Vertices whose segments curve_distances tests first (4: 2.5x faster than 8; method.md §5).
 _K_NEAREST = 4
@@ -83,12 +84,14 @@ class Polyline:
         r, idx = r.reshape(len(p), k), idx.reshape(len(p), k)
         # the segments on either side of each of the k nearest vertices
         seg = np.concatenate([idx, idx - 1], axis=1)
-        if self.closed:
+        if self.closed:  # every segment index valid
             seg %= n
-        valid = (seg >= 0) & (seg < n_seg)
-        seg = np.where(valid, seg, 0)
-        d = _segment_distance(p[:, None, :], start[seg], end[seg])
-        best = np.where(valid, d, np.inf).min(axis=1)
+            best = _segment_distance(p[:, None, :], start[seg], end[seg]).min(axis=1)
+        else:
+            valid = (seg >= 0) & (seg < n_seg)
+            seg = np.where(valid, seg, 0)
+            d = _segment_distance(p[:, None, :], start[seg], end[seg])
+            best = np.where(valid, d, np.inf).min(axis=1)
         # Exactness: the nearest point q of the polyline lies on a segment of length
         # L <= L_max. If q is inside it, p - q is perpendicular to it, so the nearer end e
         # has |p - e|^2 = |p - q|^2 + |q - e|^2 <= best^2 + L_max^2 / 4 (q at an end:
@@ -210,7 +213,7 @@ def crossing_segments(points, closed: bool = True, *, edges=None) -> np.ndarray:
     m = len(p)
     if edges is None:
         i = np.arange(m if closed else m - 1)
-        edges = np.c_[i, (i + 1) % m]
+        edges = np.stack([i, (i + 1) % m], axis=1)
     edges = np.asarray(edges, dtype=np.intp)
     a, b = p[edges[:, 0]], p[edges[:, 1]]
     lo_x, hi_x = np.minimum(a[:, 0], b[:, 0]), np.maximum(a[:, 0], b[:, 0])
@@ -236,6 +239,13 @@ def crossing_segments(points, closed: bool = True, *, edges=None) -> np.ndarray:
 
 # Loops above this x size^2 make a contour not simple (hands' noise < 4e-5; method.md §5).
 LOOP_AREA = 1e-3
+# So do loops longer than this x the RMS radius (the hands' knots at most 0.073, their
+# node spacing 0.01; a figure eight's lobe ~3).
+LOOP_LENGTH = 0.2
+# A step of a morph between inputs carrying k knots of noise's size as given carries up to
+# this x k such loops before they count as folds (the 56 morphs between the shared hands:
+# at most 1.33 x the two inputs' knots at any step).
+KNOT_SLACK = 2
 # Nodes whose spread across their principal line is at most this x their spread along it
 # lie on one line (rounding of a straight line's nodes: ~1e-14; the thinnest glyph outline
 # of 15 thin characters in six fonts, cmr10's bar: 0.026).
@@ -273,18 +283,24 @@ def check_simple(points, name: str, closed: bool = True) -> None:
 
 def _folds(p: np.ndarray, pairs: np.ndarray, closed: bool):
     """The crossing segment pairs ``(i, j)`` of the contour ``p`` (rows of
-    :func:`crossing_segments`) whose smaller loop encloses more than :data:`LOOP_AREA`
-    times the squared RMS radius, each with where they cross: ``(i, j, x)``."""
+    :func:`crossing_segments`) whose smaller loop is more than tracing noise: encloses
+    more than :data:`LOOP_AREA` times the squared RMS radius, or runs longer than
+    :data:`LOOP_LENGTH` times it (a thin sliver, or lobes of opposite turn whose areas
+    cancel), each with where they cross: ``(i, j, x)``."""
     m, scale = len(p), np.mean(np.sum((p - p.mean(axis=0)) ** 2, axis=1))
+    run = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(p, axis=0, append=p[:1]), axis=1))]
     for i, j in pairs:
         a, b, c, e = p[i], p[(i + 1) % m], p[j], p[(j + 1) % m]
         u, den = b - a, (b[0] - a[0]) * (e[1] - c[1]) - (b[1] - a[1]) * (e[0] - c[0])
         s = ((c[0] - a[0]) * (e[1] - c[1]) - (c[1] - a[1]) * (e[0] - c[0])) / den \
             if den else 0.5  # den = 0: nearly collinear nodes of a flat outline
         x = a + s * u  # where segments i and j cross
+        inner = run[j] - run[i + 1]  # the path from node i + 1 to node j
+        length = min(inner, run[-1] - inner if closed else np.inf)
         inside = np.vstack([x, p[i + 1:j + 1]])
         outside = np.vstack([x, p[j + 1:], p[:i + 1]])
-        if min(abs(area(inside)), abs(area(outside)) if closed else np.inf) > LOOP_AREA * scale:
+        loop = min(abs(area(inside)), abs(area(outside)) if closed else np.inf)
+        if loop > LOOP_AREA * scale or length > LOOP_LENGTH * np.sqrt(scale):
             yield int(i), int(j), x
 
 
@@ -312,34 +328,106 @@ def _check_contours(shape, name: str) -> None:
                              "cross (a hole lies inside its outer boundary)")
 
 
-def step_crossings(shapes, shape) -> np.ndarray:
+def step_crossings(shapes, shape, knots: int = 0) -> np.ndarray:
     """The folds of a 2D ordered :class:`Shape`'s topology on the nodes of every step,
     shape (T+1,), int: the pairs of segments that cross (:func:`crossing_segments`)
-    between two contours, or within one closing a loop larger than the tracing noise
-    :func:`check_simple` accepts (:data:`LOOP_AREA`; the shared hands carry 9-17 such
-    knots as given, and every step with them). (About 0.1 ms a step of 70 or 250 nodes,
-    0.3 ms of 1000; one pass over the segment pairs that overlap at any step took 24 ms
-    at 250 nodes and 4 s at 1000 for a half turn, which sweeps the shape over itself.)"""
-    edges = shape.edges
-    return np.array([_fold_count(points, shape, crossing_segments(points, edges=edges))
-                     for points in shapes], dtype=np.int64)
+    between two contours or, within one, closing a loop larger than tracing noise
+    (:func:`check_simple`'s), and the loops of noise's size beyond :data:`KNOT_SLACK`
+    times ``knots``, those the inputs carry as given (:func:`knot_count`: the shared
+    hands 9-17 each, which every step of a morph between two of them carries, some of
+    both); on inputs with none, every loop is a fold (two nodes swapped).
+
+    Up to :data:`_SWEPT_TOGETHER` segments, the crossings of the steps are found
+    together, :data:`_STEP_SEGMENTS` segments at a time (the same candidate pairs and
+    tests as :func:`crossing_segments`, which runs once a step above); one pass over the
+    segment pairs that overlap at any step instead took 24 ms at 250 nodes and 4 s at
+    1000 for a half turn, which sweeps the shape over itself."""
+    edges = np.asarray(shape.edges, dtype=np.intp)
+    if len(edges) > _SWEPT_TOGETHER:
+        crossed = np.array([len(crossing_segments(points, edges=edges)) for points in shapes],
+                           dtype=np.int64)
+    else:
+        p = np.asarray(shapes, dtype=np.float64)
+        per = max(1, _STEP_SEGMENTS // max(len(edges), 1))  # steps swept together
+        crossed = np.concatenate([_steps_crossed(p[s:s + per], edges)
+                                  for s in range(0, len(p), per)] or [np.zeros(0, np.int64)])
+    for t in np.flatnonzero(crossed):  # which crossings are folds (most steps have none)
+        big, tiny = _fold_count(shapes[t], shape, crossing_segments(shapes[t], edges=edges))
+        crossed[t] = big + max(0, tiny - KNOT_SLACK * knots)
+    return crossed
 
 
-def _fold_count(points: np.ndarray, shape, pairs: np.ndarray) -> int:
-    """How many of the crossing segment pairs ``pairs`` (rows of ``shape.edges``) of the
-    nodes ``points`` are folds (:func:`step_crossings`)."""
+def knot_count(shape) -> int:
+    """The loops of tracing noise's size a 2D ordered :class:`Shape` carries as given
+    (crossings that :func:`check_simple` accepts)."""
+    big, tiny = _fold_count(shape.points, shape,
+                            crossing_segments(shape.points, edges=shape.edges))
+    return tiny
+
+
+def _fold_count(points: np.ndarray, shape, pairs: np.ndarray) -> tuple[int, int]:
+    """Of the crossing segment pairs ``pairs`` (rows of ``shape.edges``) of the nodes
+    ``points``: how many are folds (between contours, or loops larger than noise) and
+    how many loops of noise's size (:func:`step_crossings`)."""
     if not len(pairs):
-        return 0
+        return 0, 0
     starts = shape.edges[:, 0]
     part = shape.contour_of[starts]
     between = part[pairs[:, 0]] != part[pairs[:, 1]]
-    count = int(between.sum())
+    big = int(between.sum())
     for k in np.unique(part[pairs[~between, 0]]):
         rows = shape.slices[k]
         within = pairs[~between & (part[pairs[:, 0]] == k)]
         local = np.sort(starts[within] - rows.start, axis=1)
-        count += sum(1 for _ in _folds(points[rows], local, shape.closed))
-    return count
+        big += sum(1 for _ in _folds(points[rows], local, shape.closed))
+    return big, len(pairs) - big
+
+
+# step_crossings sweeps the steps together up to this many segments, this many segments
+# x steps at a time: a heart pair's straight path, one thread, against one
+# crossing_segments a step: 70 nodes, 6 steps 0.38 -> 0.09 ms; 250, 12 steps 0.95 ->
+# 0.32; 500, 15 steps 1.49 -> 0.94; 700 nodes 1.67 -> 1.46; 1000 nodes 2.9 -> 2.8-3.7
+# (batches of 4000: 0.5-3.7 ms, of 20 000: 5.8 ms): above, a step at a time. With at
+# most 600 a step, 6 steps of every pair overlapping (a horizontal zigzag) are ~1 million
+# candidates, crossing_segments' _CHUNK.
+_SWEPT_TOGETHER, _STEP_SEGMENTS = 600, 4000
+
+
+def _steps_crossed(p: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """The crossing segment pairs of every step ``p`` (T, m, 2), counted (T,): each
+    step's sweep over the segments sorted by their left end (the candidates of
+    :func:`_candidate_pairs`, x-extents overlapping), done for all steps at once."""
+    T, e = len(p), len(edges)
+    a, b = p[:, edges[:, 0]], p[:, edges[:, 1]]  # (T, e, 2)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    order = np.argsort(lo[:, :, 0], axis=1, kind="stable")
+    lo_s, hi_s = (np.take_along_axis(v[:, :, 0], order, axis=1) for v in (lo, hi))
+    # stop[t, i]: how many left ends lo_s[t] <= hi_s[t, i] (searchsorted 'right'), from
+    # one stable sort of both, left ends first among equal values
+    merged = np.argsort(np.concatenate([lo_s, hi_s], axis=1), axis=1, kind="stable")
+    lows = np.cumsum(merged < e, axis=1)
+    stop = np.empty((T, e), dtype=np.intp)
+    np.put_along_axis(stop, merged[merged >= e].reshape(T, e) - e,
+                      lows[merged >= e].reshape(T, e), axis=1)
+    count = np.maximum(stop - np.arange(e) - 1, 0).ravel()
+    row = np.repeat(np.arange(T * e), count)  # (step, sorted position) of segment i
+    offset = np.arange(len(row)) - np.repeat(np.cumsum(count) - count, count)
+    t = row // e
+    i, j = order.ravel()[row], order.ravel()[row + 1 + offset]
+    e0, e1 = edges[:, 0], edges[:, 1]
+    shared = (e0[i] == e0[j]) | (e0[i] == e1[j]) | (e1[i] == e0[j]) | (e1[i] == e1[j])
+    keep = ~shared & (lo[t, i, 1] <= hi[t, j, 1]) & (lo[t, j, 1] <= hi[t, i, 1])
+    t, i, j = t[keep], i[keep], j[keep]
+    ai, bi, aj, bj = a[t, i], b[t, i], a[t, j], b[t, j]
+    cross = ((_orient(ai, bi, aj) * _orient(ai, bi, bj) < 0)
+             & (_orient(aj, bj, ai) * _orient(aj, bj, bi) < 0))
+    return np.bincount(t[cross], minlength=T).astype(np.int64)
+
+
+def _orient(o: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Sign of the turn o -> q -> r (rows (n, 2)), as :func:`crossing_segments`'s."""
+    return np.sign((q[:, 0] - o[:, 0]) * (r[:, 1] - o[:, 1])
+                   - (q[:, 1] - o[:, 1]) * (r[:, 0] - o[:, 0]))
 
 
 def roughness(points, closed: bool = True) -> float:

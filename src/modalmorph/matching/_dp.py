@@ -261,21 +261,27 @@ def pose_costs(rots, x, y, h2, S):  # pragma: no cover - compiled
     """The pose search's cost (r, m, n) of 2D nodes ``x`` (m, 2) turned by each of
     ``rots`` (r, 2, 2) against ``y`` (n, 2): ``|R x_i - y_j|^2 / h2 + S[i, j]`` with
     numpy's operations in its order (``sq_dist`` of the turned nodes), bit for bit, in one
-    pass."""
+    pass; and each row's least (r, m), ``D.min(axis=2)``'s (NaN when one is)."""
     r, m, n = len(rots), len(x), len(y)
     yy = np.empty(n)
     for j in range(n):
         yy[j] = y[j, 0] ** 2 + y[j, 1] ** 2
     D = np.empty((r, m, n))
+    low = np.empty((r, m))
     for k in range(r):
         for i in range(m):
             z0 = rots[k, 0, 0] * x[i, 0] + rots[k, 0, 1] * x[i, 1]
             z1 = rots[k, 1, 0] * x[i, 0] + rots[k, 1, 1] * x[i, 1]
             zz = z0**2 + z1**2
+            least = np.inf
             for j in range(n):
                 zy = z0 * y[j, 0] + z1 * y[j, 1]
-                D[k, i, j] = ((zz + yy[j]) - 2 * zy) / h2 + S[i, j]
-    return D
+                v = ((zz + yy[j]) - 2 * zy) / h2 + S[i, j]
+                D[k, i, j] = v
+                if v < least or v != v:
+                    least = v
+            low[k, i] = least
+    return D, low
 
 
 _TINY = np.finfo(np.float64).tiny

@@ -56,9 +56,11 @@ def whitened(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     from its factor (:func:`~modalmorph.core.element.condition_bound`), or where that is
     not small enough its eigenvalues, refuse a sigma too large for the node set."""
     Gamma = model.gram[1]
-    L, Linv, info = model.take_gamma_factor()  # dpotrf, then dtrtri
+    L, Linv, info, bound = model.take_gamma_factor()  # dpotrf, then dtrtri
+    if info == 0 and bound is None:  # not made yet (sigma=None made it for its test)
+        bound = condition_bound(Gamma, Linv)
     # the exact condition number only where the bound does not show it small enough
-    if info != 0 or not condition_bound(Gamma, Linv) < MAX_CONDITION:
+    if info != 0 or not bound < MAX_CONDITION:
         cond = model.gamma_condition
         if not cond < MAX_CONDITION or info != 0:
             raise singular_gram(model.shape, model.sigma, cond)
