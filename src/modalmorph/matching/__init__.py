@@ -161,7 +161,9 @@ POSE_DECAY = 0.02
 # surface (match3d --variants resampled) the two lie as near (ratio 0.985-1.14 at 2000 and
 # 10 000 points) and the coarse deformation holds a turn (blob 2000 at 180 deg: 7 deg from
 # the truth's similarity, rigid CPD 4.6 deg); where the coarse match's deformation is real
-# (the twisted ellipsoid, warps of 25 %, a cap cut away, on base) it lies nearer by 0.65-0.94.
+# (the twisted ellipsoid, warps of 25 %, a cap cut away at 30 deg, on base) it mostly lies
+# nearer by 0.65-0.94. Only up to CHOICE_NODES: at 100 000 points (subsets, POSE_DECAY)
+# the rigid start took blob resampled 0 deg 1.77 -> 1.63 spacings but 180 deg 2.06 -> 2.81.
 _START_GAIN = 0.95
 _REJECT = 16.0  # pairs costing more are dropped: 4 target spacings (not measured)
 
@@ -346,8 +348,8 @@ def _cloud_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> 
     normalised frame), (m, 3): :func:`_coarse_landing`, stretched by
     :func:`~modalmorph.matching.clouds.stretch` where that brings the surfaces
     ``_STRETCH_GAIN`` times closer, then :func:`modalmorph.matching.clouds.refine`, from
-    ``REFINE_COARSER`` times coarser, from those landings or from their similarity alone,
-    laid on the target by rigid CPD (:func:`_refined`)."""
+    ``REFINE_COARSER`` times coarser, from those landings or from their similarity alone
+    (:func:`_refined`)."""
     landed, start = _coarse_landing(src, tgt, n_modes, opts)
     z, y = tgt.to_normalized(landed), tgt.normalized
     stretched, trim, tree = stretch(z, y), _GAP_TRIM * tgt.spacing, cKDTree(y)
@@ -362,12 +364,13 @@ def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndar
     source nodes ``x`` on the target ``y`` (normalised frames) from whichever of two
     starts lies nearer the target's surface after refine's first level
     (:func:`~modalmorph.matching.pose.surface_gap`, capped at ``_GAP_TRIM`` spacings):
-    ``z`` as it is, where it lies ``_START_GAIN`` times nearer, or else its best
-    similarity alone laid on the target by rigid CPD
-    (:func:`~modalmorph.matching.coherent.rigid_pose`), without the deformation the coarse
+    ``z`` as it is, or its best similarity alone, without the deformation the coarse
     match gave it (carried from coarse nodes, that can hold the refinement away from the
-    truth: blob, 100 000 points, 90 deg; and a turn, on two samplings of one surface,
-    that the refinement keeps). Above ``CHOICE_NODES`` source nodes both are
+    truth: blob, 100 000 points, 90 deg). Up to ``CHOICE_NODES`` source nodes that
+    similarity is laid on the target by rigid CPD
+    (:func:`~modalmorph.matching.coherent.rigid_pose`) and ``z`` kept only where it lies
+    ``_START_GAIN`` times nearer (the coarse deformation holds a turn that the refinement
+    keeps, on two samplings of one surface). Above ``CHOICE_NODES`` source nodes both are
     tried on even subsets of both objects, the first levels keep the deformation from
     taking the pose (``POSE_DECAY``), and the levels from the third are smoothed
     ``HUGE_SMOOTHING`` cube widths wide."""
@@ -377,15 +380,14 @@ def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndar
         j = even_subset(y, max(CHOICE_NODES * len(y) // len(x), 1))
     if start < 1 or cube_levels(len(j), start) == 0:  # a source of under 16 nodes, or no
         return refine(x, z, y, start)  # level before the nodes': nothing to compare
-    posed = align(x, z).apply(x)
-    starts, yj = (z, rigid_pose(posed, y).apply(posed)), y[j]
+    large, posed = len(x) > CHOICE_NODES, align(x, z).apply(x)
+    starts, yj = (z, posed if large else rigid_pose(posed, y).apply(posed)), y[j]
     tree = cKDTree(yj)
     trim = _GAP_TRIM * tree.query(yj, k=2)[0][:, 1].mean()
-    large = len(x) > CHOICE_NODES
     decay = POSE_DECAY if large else 0.0
     firsts = [refine(x[i], s[i], yj, start, levels=1, decay=decay) for s in starts]
     gaps = [surface_gap(f, yj, trim, tree=tree) for f in firsts]
-    best = int(gaps[0] >= _START_GAIN * gaps[1])
+    best = int(gaps[1] < gaps[0]) if large else int(gaps[0] >= _START_GAIN * gaps[1])
     z = firsts[best]
     if len(i) < len(x):  # the subset's first level carried to every node
         z = starts[best] + _carried(x[i], z - starts[best][i], x, 1.0)
