@@ -128,10 +128,14 @@ def settle(fit: Fit, final: Costs, placed: Placement, ordered: bool):
 
 
 # rigid_pose: nodes of the source's even subset (the target's: as many times fewer as it
-# has fewer nodes), EM rounds at most, and the stop (relative change of sigma^2).
+# has fewer nodes), EM rounds at most, and the stop (relative change of sigma^2). On the
+# test's blob (two samplings of 4000 points, 8 deg apart): 1000 / 2000 / 4000 nodes end
+# 0.78 / 1.17 / 1.33 deg off (the samplings' chance clumps, not the count); without the
+# stop, 100 / 200 rounds 0.72 deg. In the route it costs 0.3-0.5 CPU-s at 2000-10 000 points.
 _RIGID_NODES = 1000
 _RIGID_ROUNDS = 100
 _RIGID_TOL = 1e-4
+_RIGID_SPREAD = 4  # at most this x _RIGID_NODES target nodes (memory: 4e6 distances)
 
 
 def rigid_pose(p: np.ndarray, y: np.ndarray) -> Similarity:
@@ -142,7 +146,8 @@ def rigid_pose(p: np.ndarray, y: np.ndarray) -> Similarity:
     3D point set's refinement starts from: the modal match's own similarity holds a
     part of its deformation."""
     a = p[even_subset(p, min(_RIGID_NODES, len(p)))]
-    b = y[even_subset(y, min(max(_RIGID_NODES * len(y) // len(p), 1), len(y)))]
+    b = y[even_subset(y, min(max(_RIGID_NODES * len(y) // len(p), 1), len(y),
+                             _RIGID_SPREAD * _RIGID_NODES))]
     d = a.shape[1]
     sim = Similarity(np.eye(d), 1.0, np.zeros(d))
     dist = cdist(a, b, "sqeuclidean")
@@ -150,8 +155,8 @@ def rigid_pose(p: np.ndarray, y: np.ndarray) -> Similarity:
     for _ in range(_RIGID_ROUNDS):
         w = np.exp(-(dist - dist.min(axis=0)) / (2 * sigma2))  # each target node's shares
         w /= w.sum(axis=0)
-        total = w.sum()
-        mu_a, mu_b = w.sum(axis=1) @ a / total, w.sum(axis=0) @ b / total
+        mass = w.sum()
+        mu_a, mu_b = w.sum(axis=1) @ a / mass, w.sum(axis=0) @ b / mass
         ac, bc = a - mu_a, b - mu_b
         u, sv, vt = np.linalg.svd(bc.T @ w.T @ ac)  # sum of w b a^T: Kabsch
         flip = np.ones(d)
@@ -160,7 +165,7 @@ def rigid_pose(p: np.ndarray, y: np.ndarray) -> Similarity:
         scale = float(sv @ flip / (w.sum(axis=1) @ np.sum(ac**2, axis=1)))
         sim = Similarity(rot, scale, mu_b - scale * rot @ mu_a)
         dist = cdist(sim.apply(a), b, "sqeuclidean")
-        last, sigma2 = sigma2, max(float(np.sum(w * dist) / (total * d)), 1e-12 * sigma2)
+        last, sigma2 = sigma2, max(float(np.sum(w * dist) / (mass * d)), 1e-12 * sigma2)
         if abs(last - sigma2) <= _RIGID_TOL * last:
             break
     return sim
