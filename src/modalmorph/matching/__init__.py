@@ -162,8 +162,10 @@ POSE_DECAY = 0.02
 # 10 000 points) and the coarse deformation holds a turn (blob 2000 at 180 deg: 7 deg from
 # the truth's similarity, rigid CPD 4.6 deg); where the coarse match's deformation is real
 # (the twisted ellipsoid, warps of 25 %, a cap cut away at 30 deg, on base) it mostly lies
-# nearer by 0.65-0.94. Only up to CHOICE_NODES: at 100 000 points (subsets, POSE_DECAY)
-# the rigid start took blob resampled 0 deg 1.77 -> 1.63 spacings but 180 deg 2.06 -> 2.81.
+# nearer by 0.65-0.94. Only up to CHOICE_NODES; above, the nearer of the two is taken (at
+# 100 000 points, subsets and POSE_DECAY, the 0.95 rule took blob resampled 0 deg 1.77 ->
+# 1.63 spacings but 180 deg 2.06 -> 2.81; the nearer: 30 deg 2.12 -> 1.79, 90 deg 1.85 ->
+# 1.88, 0 and 180 deg unchanged, 50 000 points at 180 deg 3.41 -> 3.15; base within 0.01).
 _START_GAIN = 0.95
 _REJECT = 16.0  # pairs costing more are dropped: 4 target spacings (not measured)
 
@@ -364,13 +366,12 @@ def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndar
     source nodes ``x`` on the target ``y`` (normalised frames) from whichever of two
     starts lies nearer the target's surface after refine's first level
     (:func:`~modalmorph.matching.pose.surface_gap`, capped at ``_GAP_TRIM`` spacings):
-    ``z`` as it is, or its best similarity alone, without the deformation the coarse
+    ``z`` as it is, or its best similarity alone laid on the target by rigid CPD
+    (:func:`~modalmorph.matching.coherent.rigid_pose`), without the deformation the coarse
     match gave it (carried from coarse nodes, that can hold the refinement away from the
-    truth: blob, 100 000 points, 90 deg). Up to ``CHOICE_NODES`` source nodes that
-    similarity is laid on the target by rigid CPD
-    (:func:`~modalmorph.matching.coherent.rigid_pose`) and ``z`` kept only where it lies
-    ``_START_GAIN`` times nearer (the coarse deformation holds a turn that the refinement
-    keeps, on two samplings of one surface). Above ``CHOICE_NODES`` source nodes both are
+    truth: blob, 100 000 points, 90 deg; and a turn that the refinement keeps, on two
+    samplings of one surface). Up to ``CHOICE_NODES`` source nodes ``z`` is kept only
+    where it lies ``_START_GAIN`` times nearer. Above ``CHOICE_NODES`` source nodes both are
     tried on even subsets of both objects, the first levels keep the deformation from
     taking the pose (``POSE_DECAY``), and the levels from the third are smoothed
     ``HUGE_SMOOTHING`` cube widths wide."""
@@ -381,7 +382,7 @@ def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndar
     if start < 1 or cube_levels(len(j), start) == 0:  # a source of under 16 nodes, or no
         return refine(x, z, y, start)  # level before the nodes': nothing to compare
     large, posed = len(x) > CHOICE_NODES, align(x, z).apply(x)
-    starts, yj = (z, posed if large else rigid_pose(posed, y).apply(posed)), y[j]
+    starts, yj = (z, rigid_pose(posed, y).apply(posed)), y[j]
     tree = cKDTree(yj)
     trim = _GAP_TRIM * tree.query(yj, k=2)[0][:, 1].mean()
     decay = POSE_DECAY if large else 0.0
