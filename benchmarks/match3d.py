@@ -414,7 +414,7 @@ def main(argv=None) -> int:
     p.add_argument("--sizes", default="500,2000,10000,50000,100000")
     p.add_argument("--angles", default="0,30,90,180")
     p.add_argument("--variants", default="base", help=f"of {', '.join(VARIANTS)}")
-    p.add_argument("--methods", default="modalmorph,cpd,bcpd", help="of " + ", ".join(PEERS))
+    p.add_argument("--methods", default="modalmorph,cpd,cpdr,bcpd", help="of " + ", ".join(PEERS))
     p.add_argument("--noise", type=float, default=0.01, help="fraction of the size")
     p.add_argument("--cpd-up-to", type=int, default=2000, help="the peers (CPD, BCPD) "
                    "run up to this many points")
