@@ -26,7 +26,9 @@ Shapes:
   pymeshlab``), each closed: a cow, a bone, an airplane with thin wings.
 
 Columns: best (the median distance from the true position to the nearest target point:
-what no pairing can beat; with noise or uneven sampling it is not 0), med/p90 (median
+what no pairing can beat; with noise or uneven sampling it is not 0), sim (the median
+error of pairing each source point with the target point nearest to where the truth's
+best similarity takes it: the pose alone, no deformation), med/p90 (median
 and 90th percentile error of the pairs returned), paired (the fraction of source points
 given a partner), <=1 / <=3 (fraction of source points whose pair is within 1 and 3
 spacings; unpaired points count as wrong), sym (for a body with a symmetry, the torus and
@@ -51,7 +53,9 @@ lattice, the same points again: there it is ``base``);
 scanner sees a surface (errors then include the distance from the true position to the
 nearest target sample); ``all``, every target point kept.
 
-Peers (``--methods``, :data:`PEERS`): ``cpd``, pycpd's deformable CPD; ``bcpd``,
+Peers (``--methods``, :data:`PEERS`): ``cpd``, pycpd's deformable CPD; ``cpdr``, pycpd's
+rigid CPD and then its deformable CPD, on both sets scaled to unit RMS radius
+(:func:`run_cpd_rigid`); ``bcpd``,
 probreg's Python BCPD (:func:`run_bcpd`; the issue's BCPD++ is a C program that no
 package registry ships). Both are optional (``pip install pycpd probreg``) and run up
 to ``--cpd-up-to`` points.
@@ -265,6 +269,17 @@ def make_case(shape: str, m: int, angle: float, noise: float, seed: int = 0, *,
     return (src, tgt, truth, move) if carry else (src, tgt, truth)
 
 
+def similar(src: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """``src`` moved by the similarity (turn, scale, shift) nearest to ``truth`` in least
+    squares (Umeyama 1991): where no deformation, only the pose, takes it."""
+    a, b = src - src.mean(axis=0), truth - truth.mean(axis=0)
+    u, d, vt = np.linalg.svd(b.T @ a)
+    flip = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
+    turn = u @ flip @ vt
+    scale = np.sum(d * np.diag(flip)) / np.sum(a**2)
+    return scale * a @ turn.T + truth.mean(axis=0)
+
+
 def errors(src, tgt, truth, pairs) -> tuple[np.ndarray, float]:
     """Per source point: the error of its pair in target spacings (inf: unpaired)."""
     h = cKDTree(tgt).query(tgt, k=2)[0][:, 1].mean()
@@ -294,17 +309,32 @@ def run_bcpd(src, tgt):
     target point."""
     from probreg import bcpd
 
-    def unit(p):
-        c = p - p.mean(axis=0)
-        return c / np.sqrt(np.mean(np.sum(c**2, axis=1)))
-
-    y = unit(tgt)
-    moved = np.asarray(bcpd.registration_bcpd(unit(src), y, w=0.1, maxiter=100)
-                       .transform(unit(src)))
+    y = unit_rms(tgt)
+    moved = np.asarray(bcpd.registration_bcpd(unit_rms(src), y, w=0.1, maxiter=100)
+                       .transform(unit_rms(src)))
     return np.c_[np.arange(len(src)), cKDTree(y).query(moved)[1]]
 
 
-PEERS = {"modalmorph": run_modalmorph, "cpd": run_cpd, "bcpd": run_bcpd}
+def unit_rms(p: np.ndarray) -> np.ndarray:
+    """``p`` centred and scaled to unit RMS radius."""
+    c = p - p.mean(axis=0)
+    return c / np.sqrt(np.mean(np.sum(c**2, axis=1)))
+
+
+def run_cpd_rigid(src, tgt):
+    """pycpd's rigid CPD (rotation, scale, shift), then its deformable CPD (defaults: beta
+    2, lambda 2) from there, both sets centred and scaled to unit RMS radius first (CPD's
+    own normalisation, Myronenko & Song 2010); each moved source point paired with its
+    nearest target point. The deformable CPD alone cannot undo a large turn."""
+    from pycpd import DeformableRegistration, RigidRegistration
+    x, y = unit_rms(tgt), unit_rms(src)
+    turned, _ = RigidRegistration(X=x, Y=y).register()
+    moved, _ = DeformableRegistration(X=x, Y=turned).register()
+    return np.c_[np.arange(len(src)), cKDTree(x).query(moved)[1]]
+
+
+PEERS = {"modalmorph": run_modalmorph, "cpd": run_cpd, "cpdr": run_cpd_rigid,
+         "bcpd": run_bcpd}
 SYMMETRIES = {"torus": torus_turns, "bone": bone_turns}  # the error modulo them too
 
 
@@ -343,8 +373,12 @@ def one(method: str, shape: str, m: int, angle: float, noise: float,
     load = os.getloadavg()[0]
     err, h = errors(src, tgt, truth, pairs)
     paired = err[np.isfinite(err)]
-    best = cKDTree(tgt).query(truth)[0] / h  # the nearest target point: no pairing does better
-    return dict(best=float(np.median(best)), med=float(np.median(paired)),
+    tree = cKDTree(tgt)
+    best = tree.query(truth)[0] / h  # the nearest target point: no pairing does better
+    near = tree.query(similar(src, truth))[1]  # the truth's best similarity, no warp
+    sim = np.linalg.norm(tgt[near] - truth, axis=1) / h
+    return dict(best=float(np.median(best)), sim=float(np.median(sim)),
+                med=float(np.median(paired)),
                 sym=modulo_symmetry(shape, src, tgt, move, pairs, h),
                 p90=float(np.percentile(paired, 90)),
                 paired=len(paired) / len(err), w1=float(np.mean(err <= 1)),
@@ -366,7 +400,7 @@ def child(args, method, shape, m, angle, variant="base") -> dict | str:
 def available(method: str, shape: str) -> bool:
     """Whether a peer's package (pycpd: ``pip install pycpd``; probreg) and the shape's
     (trimesh, pymeshlab) are installed."""
-    need = {"cpd": ["pycpd"], "bcpd": ["probreg"]}.get(method, [])
+    need = {"cpd": ["pycpd"], "cpdr": ["pycpd"], "bcpd": ["probreg"]}.get(method, [])
     need += {"torus": ["trimesh"]}.get(shape, ["trimesh", "pymeshlab"] if shape in PACKAGED
                                               else [])
     return all(importlib.util.find_spec(name) is not None for name in need)
@@ -380,7 +414,7 @@ def main(argv=None) -> int:
     p.add_argument("--sizes", default="500,2000,10000,50000,100000")
     p.add_argument("--angles", default="0,30,90,180")
     p.add_argument("--variants", default="base", help=f"of {', '.join(VARIANTS)}")
-    p.add_argument("--methods", default="modalmorph,cpd,bcpd", help="of " + ", ".join(PEERS))
+    p.add_argument("--methods", default="modalmorph,cpd,cpdr,bcpd", help="of " + ", ".join(PEERS))
     p.add_argument("--noise", type=float, default=0.01, help="fraction of the size")
     p.add_argument("--cpd-up-to", type=int, default=2000, help="the peers (CPD, BCPD) "
                    "run up to this many points")
@@ -394,7 +428,7 @@ def main(argv=None) -> int:
           f"{WARP[0]:.0%}-{WARP[1]:.0%}; variants: {VARIANTS}; error in target spacings; "
           f"peak RSS in MB")
     print(f"{'shape':>7} {'variant':>7} {'points':>7} {'angle':>5} {'method':>10} {'best':>5} "
-          f"{'med':>6} {'sym':>5} "
+          f"{'sim':>5} {'med':>6} {'sym':>5} "
           f"{'p90':>6} {'paired':>6} {'<=1':>5} {'<=3':>5} {'time s':>7} {'peak':>6} "
           f"{'load':>5}",
           flush=True)
@@ -409,7 +443,8 @@ def main(argv=None) -> int:
                         r = (child(args, method, shape, m, angle, variant)
                              if available(method, shape) else "not installed")
                         print(f"{head} {r:>6}" if isinstance(r, str) else
-                              f"{head} {r['best']:>5.2f} {r['med']:>6.2f} {r['sym']:>5.2f} "
+                              f"{head} {r['best']:>5.2f} {r['sim']:>5.2f} {r['med']:>6.2f} "
+                              f"{r['sym']:>5.2f} "
                               f"{r['p90']:>6.2f} "
                               f"{r['paired']:>6.2f} "
                               f"{r['w1']:>5.2f} {r['w3']:>5.2f} {r['s']:>7.2f} "

@@ -217,3 +217,22 @@ def test_refine_starts_from_the_similarity_where_the_coarse_deformation_is_wrong
     start = matching.COARSE // 4 // matching.REFINE_COARSER  # as the matcher's, 62
     assert np.median(np.linalg.norm(refine(x, z, y, start) - true, axis=1)) / h >= 1.5
     assert np.median(np.linalg.norm(_refined(x, z, y, start) - true, axis=1)) / h <= 0.3
+
+
+def test_rigid_pose_recovers_a_similarity_between_independent_samplings():
+    """Rigid CPD (coherent.rigid_pose) lays one sampling of the blob on another, drawn
+    anew, turned 8 deg, scaled 1.1 and shifted, with 1 % noise and 20 % dropped: the
+    turn it finds within a fifth of the true one (0.78 deg off: the two samplings' chance
+    clumps), the scale within 1 %; on one sampling turned the same, exactly."""
+    from modalmorph.matching.coherent import rigid_pose
+    rng = np.random.default_rng(3)
+    src, other = blob(4000, rng), blob(4000, rng)
+    rot = Rotation.from_rotvec(np.deg2rad(8.0) * np.array([0.6, 0.0, 0.8]))
+    tgt = 1.1 * rot.apply(other) + [0.1, -0.2, 0.05]
+    tgt = (tgt + 0.006 * rng.normal(size=tgt.shape))[rng.permutation(4000)[:3200]]
+    sim = rigid_pose(src, tgt)
+    off = Rotation.from_matrix(sim.rotation) * rot.inv()
+    assert np.rad2deg(off.magnitude()) < 8.0 / 5
+    assert abs(sim.scale / 1.1 - 1) < 0.01
+    same = rigid_pose(src[:1000], 1.1 * rot.apply(src[:1000]) + [0.1, -0.2, 0.05])
+    assert np.rad2deg((Rotation.from_matrix(same.rotation) * rot.inv()).magnitude()) < 1e-6

@@ -59,7 +59,7 @@ from ..options import METHODS, ROTATIONS, MatchOptions
 from ..threads import blas_threads, limit
 from .alternation import Placement, alternate, fits, keep_or_turn
 from .clouds import cube_levels, finer, refine, stretch
-from .coherent import settle
+from .coherent import rigid_pose, settle
 from .contours import keep_partners, match_contours
 from .features import (
     FEATURE_SIGMA,
@@ -157,6 +157,18 @@ CHOICE_NODES = 10_000
 # 0.01 / 0.02 / 0.05: 2.03 / 1.88 / 2.41; at
 # every level: 2.00; the subsets' or the refinement's first level alone: 2.00 / 2.14.
 POSE_DECAY = 0.02
+# refine (_refined) starts from the coarse landing only where, after its first level, that
+# lies nearer the target's surface than this x the rigid pose's (coherent.rigid_pose: the
+# modal match's similarity laid on the target by rigid CPD) does: on two samplings of one
+# surface (match3d --variants resampled) the two lie as near (ratio 0.985-1.14 at 2000 and
+# 10 000 points) and the coarse deformation holds a turn (blob 2000 at 180 deg: 7 deg from
+# the truth's similarity, rigid CPD 4.6 deg); where the coarse match's deformation is real
+# (the twisted ellipsoid, warps of 25 %, a cap cut away at 30 deg, on base) it mostly lies
+# nearer by 0.65-0.94. Only up to CHOICE_NODES; above, the nearer of the two is taken (at
+# 100 000 points, subsets and POSE_DECAY, the 0.95 rule took blob resampled 0 deg 1.77 ->
+# 1.63 spacings but 180 deg 2.06 -> 2.81; the nearer: 30 deg 2.12 -> 1.79, 90 deg 1.85 ->
+# 1.88, 0 and 180 deg unchanged, 50 000 points at 180 deg 3.41 -> 3.15; base within 0.01).
+_START_GAIN = 0.95
 _REJECT = 16.0  # pairs costing more are dropped: 4 target spacings (not measured)
 
 
@@ -348,8 +360,8 @@ def _cloud_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> 
     normalised frame), (m, 3): :func:`_coarse_landing`, stretched by
     :func:`~modalmorph.matching.clouds.stretch` where that brings the surfaces
     ``_STRETCH_GAIN`` times closer, then :func:`modalmorph.matching.clouds.refine`, from
-    ``REFINE_COARSER`` times coarser, from those landings or from their best similarity
-    alone (:func:`_refined`)."""
+    ``REFINE_COARSER`` times coarser, from those landings or from their similarity alone
+    (:func:`_refined`)."""
     landed, start = _coarse_landing(src, tgt, n_modes, opts)
     z, y = tgt.to_normalized(landed), tgt.normalized
     stretched, trim, tree = stretch(z, y), _GAP_TRIM * tgt.spacing, cKDTree(y)
@@ -364,9 +376,12 @@ def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndar
     source nodes ``x`` on the target ``y`` (normalised frames) from whichever of two
     starts lies nearer the target's surface after refine's first level
     (:func:`~modalmorph.matching.pose.surface_gap`, capped at ``_GAP_TRIM`` spacings):
-    ``z`` as it is, or its best similarity alone, without the deformation the coarse
+    ``z`` as it is, or its best similarity alone laid on the target by rigid CPD
+    (:func:`~modalmorph.matching.coherent.rigid_pose`), without the deformation the coarse
     match gave it (carried from coarse nodes, that can hold the refinement away from the
-    truth: blob, 100 000 points, 90 deg). Above ``CHOICE_NODES`` source nodes both are
+    truth: blob, 100 000 points, 90 deg; and a turn that the refinement keeps, on two
+    samplings of one surface). Up to ``CHOICE_NODES`` source nodes ``z`` is kept only
+    where it lies ``_START_GAIN`` times nearer. Above ``CHOICE_NODES`` source nodes both are
     tried on even subsets of both objects, the first levels keep the deformation from
     taking the pose (``POSE_DECAY``), and the levels from the third are smoothed
     ``HUGE_SMOOTHING`` cube widths wide."""
@@ -376,13 +391,14 @@ def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndar
         j = even_subset(y, max(CHOICE_NODES * len(y) // len(x), 1))
     if start < 1 or cube_levels(len(j), start) == 0:  # a source of under 16 nodes, or no
         return refine(x, z, y, start)  # level before the nodes': nothing to compare
-    starts, yj = (z, align(x, z).apply(x)), y[j]
+    large, posed = len(x) > CHOICE_NODES, align(x, z).apply(x)
+    starts, yj = (z, rigid_pose(posed, y).apply(posed)), y[j]
     tree = cKDTree(yj)
     trim = _GAP_TRIM * tree.query(yj, k=2)[0][:, 1].mean()
-    large = len(x) > CHOICE_NODES
     decay = POSE_DECAY if large else 0.0
     firsts = [refine(x[i], s[i], yj, start, levels=1, decay=decay) for s in starts]
-    best = int(np.argmin([surface_gap(f, yj, trim, tree=tree) for f in firsts]))
+    gaps = [surface_gap(f, yj, trim, tree=tree) for f in firsts]
+    best = int(gaps[1] < gaps[0]) if large else int(gaps[0] >= _START_GAIN * gaps[1])
     z = firsts[best]
     if len(i) < len(x):  # the subset's first level carried to every node
         z = starts[best] + _carried(x[i], z - starts[best][i], x, 1.0)

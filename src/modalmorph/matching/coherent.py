@@ -1,4 +1,5 @@
-"""The coherent pass of the default matcher on contours (method.md §2).
+"""The coherent passes of the default matcher: on contours (method.md §2), and the
+rigid one that poses a 3D point set (:func:`rigid_pose`).
 
 Geometry alone leaves the position along a near-circular stretch open. After the
 alternation, :func:`drift` moves the source by coherent point drift (Myronenko & Song
@@ -10,12 +11,15 @@ to a few target spacings, only where it does not raise the search's objective.
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.distance import cdist
 
+from ..core.align import Similarity
+from ..core.shape import even_subset
 from .alternation import Fit, Placement
 from .features import sq_dist
 from .search import Costs, pairs_at, total
 
-__all__ = ["drift", "settle"]
+__all__ = ["drift", "rigid_pose", "settle"]
 
 _COHERENT_WIDTH = 1.0  # kernel width x target RMS radius (hand precision 1.5: 0.835, 1: 0.866)
 _COHERENT_LAMBDA = 2.0  # smoothness weight, CPD's default (8: warp-strong 0.958 vs 0.985)
@@ -121,3 +125,47 @@ def settle(fit: Fit, final: Costs, placed: Placement, ordered: bool):
     if total(there, len(z)) <= total(found, len(z)):
         return z, there
     return placed.z, found
+
+
+# rigid_pose: nodes of the source's even subset (the target's: as many times fewer as it
+# has fewer nodes), EM rounds at most, and the stop (relative change of sigma^2). On the
+# test's blob (two samplings of 4000 points, 8 deg apart): 1000 / 2000 / 4000 nodes end
+# 0.78 / 1.17 / 1.33 deg off (the samplings' chance clumps, not the count); without the
+# stop, 100 / 200 rounds 0.72 deg. In the route it costs 0.3-0.5 CPU-s at 2000-10 000 points.
+_RIGID_NODES = 1000
+_RIGID_ROUNDS = 100
+_RIGID_TOL = 1e-4
+_RIGID_SPREAD = 4  # at most this x _RIGID_NODES target nodes (memory: 4e6 distances)
+
+
+def rigid_pose(p: np.ndarray, y: np.ndarray) -> Similarity:
+    """The similarity that best lays the posed source ``p`` (m, 3) on the target ``y``
+    (n, 3) as a Gaussian mixture: rigid coherent point drift (Myronenko & Song 2010,
+    with scale; no outlier term), on even subsets of ``_RIGID_NODES`` source nodes,
+    started at the identity with CPD's wide sigma, which narrows as it fits. The pose a
+    3D point set's refinement starts from: the modal match's own similarity holds a
+    part of its deformation."""
+    a = p[even_subset(p, min(_RIGID_NODES, len(p)))]
+    b = y[even_subset(y, min(max(_RIGID_NODES * len(y) // len(p), 1), len(y),
+                             _RIGID_SPREAD * _RIGID_NODES))]
+    d = a.shape[1]
+    sim = Similarity(np.eye(d), 1.0, np.zeros(d))
+    dist = cdist(a, b, "sqeuclidean")
+    sigma2 = dist.mean() / d
+    for _ in range(_RIGID_ROUNDS):
+        w = np.exp(-(dist - dist.min(axis=0)) / (2 * sigma2))  # each target node's shares
+        w /= w.sum(axis=0)
+        mass = w.sum()
+        mu_a, mu_b = w.sum(axis=1) @ a / mass, w.sum(axis=0) @ b / mass
+        ac, bc = a - mu_a, b - mu_b
+        u, sv, vt = np.linalg.svd(bc.T @ w.T @ ac)  # sum of w b a^T: Kabsch
+        flip = np.ones(d)
+        flip[-1] = np.sign(np.linalg.det(u @ vt))
+        rot = u @ np.diag(flip) @ vt
+        scale = float(sv @ flip / (w.sum(axis=1) @ np.sum(ac**2, axis=1)))
+        sim = Similarity(rot, scale, mu_b - scale * rot @ mu_a)
+        dist = cdist(sim.apply(a), b, "sqeuclidean")
+        last, sigma2 = sigma2, max(float(np.sum(w * dist) / (mass * d)), 1e-12 * sigma2)
+        if abs(last - sigma2) <= _RIGID_TOL * last:
+            break
+    return sim
