@@ -377,8 +377,10 @@ def _run_match(args) -> int:
             ax.figure.savefig(tmp, dpi=200, bbox_inches="tight")
     if not args.quiet:
         where = f" -> {args.out}" if args.out else ""
+        mirror = (f"; the target looks like the source's mirror image (the source reflected "
+                  f"fits it {result.mirror:.3g} times nearer)" if result.mirror else "")
         print(f"{len(result.pairs)} pairs of {source.m} source and {target.m} target nodes "
-              f"({result.method}){where}", file=sys.stderr)
+              f"({result.method}){where}{mirror}", file=sys.stderr)
     return EXIT_OK
 
 

@@ -187,7 +187,8 @@ class ContourStop(StopTest):
 
     @property
     def resolution(self) -> tuple[float, int, int, tuple | None]:
-        i = int(np.argmax([test.floor for test in self.tests]))
+        i = int(np.argmax([test.floor if test.m < len(test.target) else -np.inf
+                           for test in self.tests]))  # of the coarser sources
         floor, m, n, _ = self.tests[i].resolution
         return floor, m, n, tuple(int(k) for k in self.partners[i])
 
