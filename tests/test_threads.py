@@ -74,7 +74,13 @@ def test_the_allocator_is_tuned_once_on_glibc_and_left_alone_when_asked(monkeypa
             return sum(block.sum() for block in [np.ones(1 << 18) for _ in range(5)])
 
         work()
-        before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
-        for _ in range(20):
-            work()
-        assert resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before < 1000
+
+        def faults():
+            before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+            for _ in range(20):
+                work()
+            return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
+
+        # the least of three tries: once, late in a full run beside another process's
+        # benchmark, one try faulted 20 500 pages (the next full run: none)
+        assert min(faults() for _ in range(3)) < 1000
