@@ -239,7 +239,7 @@ def test_step_crossings_counts_folds_not_tracing_knots():
     check_simple(knot, "knot")
     assert knot_count(Shape(knot)) == 1 and knot_count(shape) == 0
     assert_array_equal(step_crossings([circle, knot, eight], shape), [0, 1, 1])
-    assert_array_equal(step_crossings([circle, knot, eight], shape, knots=1), [0, 0, 1])
+    assert_array_equal(step_crossings([circle, knot, eight], shape, (Shape(knot),)), [0, 0, 1])
     two = Shape(np.r_[circle, 0.5 * circle], contours=(200, 200))
     assert_array_equal(step_crossings([two.points, np.r_[circle, 0.5 * circle + [0.8, 0]]],
                                       two), [0, 2])

@@ -43,7 +43,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .core.align import Similarity, align
-from .core.quality import check_contours, knot_count, step_crossings
+from .core.quality import check_contours, step_crossings
 from .core.shape import Shape, as_shape
 from .core.surfaces import intersection_sentence, step_self_intersections, unlike_sentence
 from .errors import MorphDivergedError, OptionError, ShapeError
@@ -213,8 +213,7 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
     if src.dim == 3 and src.has_faces:
         crossed = step_self_intersections(run.shapes, src.faces)
     elif src.dim == 2 and src.ordered:  # a contour folded through itself; the source is
-        knots = knot_count(src) + (knot_count(tgt) if tgt.ordered else 0)  # as given
-        crossed = np.r_[0, step_crossings(run.shapes[1:], src, knots)]
+        crossed = np.r_[0, step_crossings(run.shapes[1:], src, (src, tgt))]
     turn = None  # the hint's turn, where folds come of a turn taken as straight paths
     if crossed is not None and np.any(crossed) and found is not None and turned is None:
         turn = found.angle

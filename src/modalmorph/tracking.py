@@ -22,7 +22,7 @@ from functools import partial
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .core.quality import area, curve_distances, knot_count, step_crossings
+from .core.quality import area, curve_distances, step_crossings
 from .core.shape import Shape, as_shape
 from .errors import MorphDivergedError, OptionError, ShapeError
 from .matching import match
@@ -293,7 +293,7 @@ def _sound(result: Morph, first: Shape, observed: Shape) -> bool:
     observed contour (surfaces and point sets: node to node distances depend on how
     densely each frame is sampled, so no such test)."""
     end = result.shapes[-1]
-    if not result.converged or _crosses_itself(end, first, _knots(first, observed)):
+    if not result.converged or _crosses_itself(end, first, (first, observed)):
         return False
     return not (first.ordered and first.faces is None) or curve_distance(
         first.with_points(end), observed) <= FIT_SPACINGS * first.spacing * first.size
@@ -308,7 +308,7 @@ def _morph_frame(source: Shape, target: Shape, f: int, *, names: tuple,
     try:
         cast = along_normals(source, target) if normal else None
         if cast is not None and len(np.unique(cast, axis=0)) == len(cast) and \
-                not _crosses_itself(cast, source, _knots(target)):
+                not _crosses_itself(cast, source, (target,)):
             target = source.with_points(cast)  # node i to its own point on the polyline
             pairs = np.repeat(np.arange(source.m)[:, None], 2, axis=1)
         else:  # (normal targets that cross or coincide, open contours: nearest pairs)
@@ -397,7 +397,7 @@ def _result(shapes, names, points, runs, closure, params) -> Track:
         segment_of_edge=seg,
         distance=np.array([curve_distance(first.with_points(p), s)
                            for p, s in zip(points, shapes, strict=True)]),
-        crossed=np.array([_crosses_itself(p, first, _knots(first, s))
+        crossed=np.array([_crosses_itself(p, first, (first, s))
                           for p, s in zip(points, shapes, strict=True)]),
         closure=closure, closure_error=closure_error, params=params)
 
@@ -564,18 +564,12 @@ def _contours_distance(a: Shape, b: Shape) -> float:
     return float(max(np.concatenate(d_ab).mean(), np.concatenate(d_ba).mean()))
 
 
-def _knots(*shapes: Shape) -> int:
-    """The loops of tracing noise's size the 2D contours ``shapes`` carry as given
-    (:func:`~modalmorph.core.quality.knot_count`; 0 for other objects)."""
-    return sum(knot_count(s) for s in shapes if s.dim == 2 and s.ordered)
-
-
-def _crosses_itself(points: np.ndarray, first: Shape, knots: int = 0) -> bool:
+def _crosses_itself(points: np.ndarray, first: Shape, inputs: tuple = ()) -> bool:
     """Whether a 2D contour (frame 0's topology on ``points``) folds: crosses itself
     beyond tracing noise, one contour crosses another, or it has more loops of noise's
-    size than ``knots``, those the frames carry as given
+    size than the frames ``inputs`` carry as given
     (:func:`~modalmorph.core.quality.step_crossings`, as ``Morph.self_intersections``
     counts them)."""
     if points.shape[1] != 2 or not first.ordered:
         return False
-    return bool(step_crossings([points], first, knots)[0])
+    return bool(step_crossings([points], first, inputs)[0])

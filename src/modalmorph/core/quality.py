@@ -328,14 +328,15 @@ def _check_contours(shape, name: str) -> None:
                              "cross (a hole lies inside its outer boundary)")
 
 
-def step_crossings(shapes, shape, knots: int = 0) -> np.ndarray:
+def step_crossings(shapes, shape, inputs: tuple = ()) -> np.ndarray:
     """The folds of a 2D ordered :class:`Shape`'s topology on the nodes of every step,
     shape (T+1,), int: the pairs of segments that cross (:func:`crossing_segments`)
     between two contours or, within one, closing a loop larger than tracing noise
     (:func:`check_simple`'s), and the loops of noise's size beyond :data:`KNOT_SLACK`
-    times ``knots``, those the inputs carry as given (:func:`knot_count`: the shared
-    hands 9-17 each, which every step of a morph between two of them carries, some of
-    both); on inputs with none, every loop is a fold (two nodes swapped).
+    times those the 2D contours ``inputs`` carry as given (:func:`knot_count`, counted
+    only where a step crosses: the shared hands 9-17 each, which every step of a morph
+    between two of them carries, some of both); on inputs with none, every loop is a
+    fold (two nodes swapped).
 
     Up to :data:`_SWEPT_TOGETHER` segments, the crossings of the steps are found
     together, :data:`_STEP_SEGMENTS` segments at a time (the same candidate pairs and
@@ -351,8 +352,11 @@ def step_crossings(shapes, shape, knots: int = 0) -> np.ndarray:
         per = max(1, _STEP_SEGMENTS // max(len(edges), 1))  # steps swept together
         crossed = np.concatenate([_steps_crossed(p[s:s + per], edges)
                                   for s in range(0, len(p), per)] or [np.zeros(0, np.int64)])
+    knots = None
     for t in np.flatnonzero(crossed):  # which crossings are folds (most steps have none)
         big, tiny = _fold_count(shapes[t], shape, crossing_segments(shapes[t], edges=edges))
+        if knots is None:
+            knots = sum(knot_count(s) for s in inputs if s.dim == 2 and s.ordered)
         crossed[t] = big + max(0, tiny - KNOT_SLACK * knots)
     return crossed
 
