@@ -30,7 +30,7 @@ from ..version import __version__
 from . import batch, strain
 from . import stance as stance_app
 from .app import serve
-from .progress import batch_progress, progress_bar
+from .progress import batch_progress, interruptible, progress_bar
 from .runs import (
     BATCH_CLASSES,
     PAIR_CLASSES,
@@ -91,7 +91,8 @@ def main(argv: list[str] | None = None) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("default")
         try:
-            code = args.run(args)
+            with interruptible():
+                code = args.run(args)
         except KeyboardInterrupt:  # output folders are replaced whole or not at all
             print("modalmorph: interrupted", file=sys.stderr)
             return EXIT_INTERRUPTED

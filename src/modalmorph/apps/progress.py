@@ -5,18 +5,59 @@ a sequence's frames (:func:`progress_bar`), one over a batch's items
 from __future__ import annotations
 
 import contextlib
+import signal
 import sys
+import threading
 import time
 
-__all__ = ["progress_bar", "batch_progress"]
+__all__ = ["progress_bar", "batch_progress", "interruptible"]
+
+_INTERRUPTED: list[int] = []  # SIGINT seen during the command (interruptible)
+
+
+@contextlib.contextmanager
+def interruptible():
+    """Ctrl-C that C code cannot swallow: SIGINT raises KeyboardInterrupt as Python's own
+    handler does, and is remembered, so that each step of a progress bar raises it again
+    where a C callback ignored it (numba's compiler, on the first match after installing:
+    under load the run then went on to its end); the unraisable hook's report of that
+    ignored interrupt is not printed."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum, frame):
+        _INTERRUPTED.append(signum)
+        raise KeyboardInterrupt
+
+    def unraisable(info, hook=sys.unraisablehook):
+        if not isinstance(info.exc_value, KeyboardInterrupt):
+            hook(info)
+
+    _INTERRUPTED.clear()
+    previous, hook = signal.signal(signal.SIGINT, interrupt), sys.unraisablehook
+    sys.unraisablehook = unraisable
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        sys.unraisablehook = hook
+        _INTERRUPTED.clear()
+
+
+def _check() -> None:
+    """KeyboardInterrupt where a SIGINT was seen (:func:`interruptible`)."""
+    if _INTERRUPTED:
+        raise KeyboardInterrupt
 
 
 @contextlib.contextmanager
 def progress_bar(total: int | None, *, quiet: bool, what: str = "morphing", unit: str = "step"):
     """A rich progress bar on a terminal, completed to 100 % when the run ends (its total
-    becomes the steps taken); nothing when quiet or not on a terminal."""
+    becomes the steps taken); nothing shown when quiet or not on a terminal. Each step
+    raises a Ctrl-C that C code swallowed (:func:`interruptible`)."""
     if quiet or not sys.stderr.isatty():
-        yield None
+        yield lambda step, distance: _check()
         return
     from rich.console import Console
     from rich.progress import Progress
@@ -26,6 +67,7 @@ def progress_bar(total: int | None, *, quiet: bool, what: str = "morphing", unit
         task = bar.add_task(what, total=total)
 
         def update(step, distance):
+            _check()
             done[0] = step
             bar.update(task, completed=step, description=f"{what}: {unit} {step}" + (
                 "" if distance is None else f", mean distance of matched pairs {distance:.3g}"))
