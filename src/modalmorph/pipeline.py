@@ -47,8 +47,9 @@ from .core.quality import check_contours, step_crossings
 from .core.shape import Shape, as_shape
 from .core.surfaces import intersection_sentence, step_self_intersections, unlike_sentence
 from .errors import MorphDivergedError, OptionError, ShapeError
-from .matching import MIRROR_EXACT, Matching, match
+from .matching import Matching, match
 from .matching.contours import unpaired_sentence
+from .matching.mirror import mirror_said
 from .options import MatchOptions, MorphOptions, split_overrides
 from .simulation import SPARSE_MODES, Run, Simulation
 from .simulation.driver import mean_pair_distance
@@ -212,7 +213,7 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
     crossed = None
     if src.dim == 3 and src.has_faces:
         crossed = step_self_intersections(run.shapes, src.faces)
-    elif src.dim == 2 and src.ordered:  # a contour folded through itself; the source is
+    elif src.dim == 2 and src.ordered:  # a contour folded through itself
         crossed = np.r_[0, step_crossings(run.shapes[1:], src, (src, tgt))]
     turn = None  # the hint's turn, where folds come of a turn taken as straight paths
     if crossed is not None and np.any(crossed) and found is not None and turned is None:
@@ -265,11 +266,9 @@ def _mirror_sentence(mirror: float | None) -> str:
     (:attr:`Matching.mirror`)."""
     if not mirror:
         return ""
-    how = "exactly" if mirror * MIRROR_EXACT > 0.5 else f"{mirror:.3g} times nearer"
-    return (f"; the target looks like the source's mirror image (the source reflected fits "
-            f"it {how}): no rotation takes a shape into its mirror image, so the pairs join "
-            "unlike parts and the deformation is large; to compare the two shapes, mirror "
-            "one input (flip it left to right)")
+    return (f"; {mirror_said(mirror)}: no rotation takes a shape into its mirror image, so "
+            "the pairs join unlike parts and the deformation is large; to compare the two "
+            "shapes, mirror one input (flip it left to right)")
 
 
 def _pairs_similarity(a: np.ndarray, b: np.ndarray) -> Similarity | None:

@@ -24,6 +24,7 @@ from ..errors import MorphDivergedError, OptionError
 from ..figures import plot_matches
 from ..io import atomic_output_dir, atomic_write
 from ..matching import match
+from ..matching.mirror import mirror_said
 from ..options import MatchOptions, ReadOptions, StanceOptions, StrainOptions, flat_fields
 from ..threads import tune_allocator
 from ..version import __version__
@@ -378,8 +379,7 @@ def _run_match(args) -> int:
             ax.figure.savefig(tmp, dpi=200, bbox_inches="tight")
     if not args.quiet:
         where = f" -> {args.out}" if args.out else ""
-        mirror = (f"; the target looks like the source's mirror image (the source reflected "
-                  f"fits it {result.mirror:.3g} times nearer)" if result.mirror else "")
+        mirror = f"; {mirror_said(result.mirror)}" if result.mirror else ""
         print(f"{len(result.pairs)} pairs of {source.m} source and {target.m} target nodes "
               f"({result.method}){where}{mirror}", file=sys.stderr)
     return EXIT_OK

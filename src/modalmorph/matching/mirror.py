@@ -13,7 +13,7 @@ from ..core.align import Similarity
 from ..core.shape import Shape
 from ..options import MatchOptions
 
-__all__ = ["MIRROR", "MIRROR_EXACT", "MIRROR_SUSPECT", "mirror_ratio"]
+__all__ = ["MIRROR", "MIRROR_EXACT", "MIRROR_SUSPECT", "mirror_ratio", "mirror_said"]
 
 log = logging.getLogger(__name__)
 
@@ -62,6 +62,13 @@ def mirror_ratio(matcher, src: Shape, tgt: Shape, opts: MatchOptions,
     g1 = _gap(ref.points, tgt.points, matcher(ref, tgt, opts=opts.replace(rotation="free"))[2])
     if not g0 > MIRROR * g1:
         return None
-    log.debug("the target looks like the source's mirror image: the source reflected "
-              "lies %.3g times nearer it", g0 / max(g1, MIRROR_EXACT * g0))
-    return float(g0 / max(g1, MIRROR_EXACT * g0))
+    ratio = float(g0 / max(g1, MIRROR_EXACT * g0))
+    log.debug("%s", mirror_said(ratio))
+    return ratio
+
+
+def mirror_said(mirror: float) -> str:
+    """The clause saying that the target looks like the source's mirror image, and how
+    much nearer the source reflected fits it (:attr:`Matching.mirror`)."""
+    how = "exactly" if mirror * MIRROR_EXACT > 0.5 else f"{mirror:.3g} times nearer"
+    return f"the target looks like the source's mirror image (the source reflected fits it {how})"
