@@ -209,3 +209,25 @@ def test_a_single_loaded_sensor_is_skipped_though_the_smoothing_spreads_it(tmp_p
         result = stance(stack)
     assert len(result.parts) == 1
     assert "1 contact(s) smaller than 2 sensors skipped" in caplog.text
+
+
+def test_a_template_of_the_other_foot_is_said(caplog):
+    """A template mirrored left-right (the other foot's) deforms every part into its
+    mirror image: each image is said to look like the other foot, its energy higher;
+    the same foot as given never is."""
+    from modalmorph import register_footprints
+    from modalmorph.pedobarography import OTHER_FOOT
+
+    r, c = np.indices((H, W), dtype=float)
+    foot = [80 * np.exp(-0.5 * (((r - 8) / 3) ** 2 + ((c - 6) / 2.5) ** 2))  # heel, medial
+            + 60 * np.exp(-0.5 * (((r - 28) / 4) ** 2 + ((c - 12 - k) / 4) ** 2))
+            for k in range(3)]  # forefoot, lateral, a little differently each trial
+    peaks = np.where(np.array(foot) > 3, foot, 0.0)
+    same = register_footprints(peaks, template=0, threshold=5.0)
+    assert all(reg.other_foot < 1 / OTHER_FOOT for reg in same)
+    with caplog.at_level(logging.WARNING):
+        other = register_footprints(peaks, template=peaks[0][:, ::-1], threshold=5.0)
+    assert all(reg.other_foot > OTHER_FOOT for reg in other)
+    assert "3 of 3 images look like the other foot" in caplog.text
+    for a, b in zip(same, other, strict=True):  # the mirror image costs more: 0.09-0.40
+        assert b.energy > a.energy + 0.05  # against 0-0.15 as given

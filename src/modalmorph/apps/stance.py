@@ -27,7 +27,7 @@ from ..figures.stance import length_unit, plot_footprints, save_stance_figures
 from ..io import atomic_output_dir
 from ..io.pressure import jiku_conditions, jiku_peaks, jiku_trial, read_pressure
 from ..options import StanceOptions, split
-from ..pedobarography import register_footprints, stance
+from ..pedobarography import OTHER_FOOT, register_footprints, stance
 
 __all__ = ["add_parser", "is_pressure_stack", "run", "run_footprints", "stance_files",
            "stance_summary", "track_stack", "write_footprints", "write_stance"]
@@ -113,8 +113,10 @@ def run_footprints(args) -> int:
                                                         options=opts.record()))
     if not args.quiet:
         energy = np.array([r.energy for r in regs])
+        other = sum(r.other_foot > OTHER_FOOT for r in regs)
         print(f"{len(regs)} images registered; strain energy median {np.median(energy):.4g}"
-              f", {sum(bool(r.missing) for r in regs)} with a template part unpaired",
+              f", {sum(bool(r.missing) for r in regs)} with a template part unpaired"
+              + (f", {other} that look like the other foot" if other else ""),
               file=sys.stderr)
     return 0
 
@@ -140,12 +142,12 @@ def write_footprints(regs, folder: Path, columns: dict, record: dict, *,
         writer = csv.writer(fh)
         writer.writerow(["image", *columns, "area_mm2", "energy",
                          *(f"energy_part_{k}" for k in range(n_parts)), "peak_part",
-                         "peak_x_mm", "peak_y_mm", "unpaired_parts"])
+                         "peak_x_mm", "peak_y_mm", "unpaired_parts", "other_foot"])
         for i, r in enumerate(regs):
             writer.writerow([i, *(v[i] for v in columns.values()), f"{r.area:.6g}",
                              f"{r.energy:.6g}", *(f"{e:.6g}" for e in r.part_energy),
                              r.peak_part, f"{r.peak[0]:.4g}", f"{r.peak[1]:.4g}",
-                             " ".join(map(str, r.missing))])
+                             " ".join(map(str, r.missing)), f"{r.other_foot:.3g}"])
     if not figure:
         return
     fig = Figure(figsize=(min(len(regs), 20) * 0.7 + 1.5, 2.2 * -(-len(regs) // 20) + 0.3),
