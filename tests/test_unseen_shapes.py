@@ -100,6 +100,34 @@ def test_demo_heart_keeps_frame():
     _check(a, b, rot_max=20.0)
 
 
+def _polygon(corners, n):
+    t = 2 * np.pi * np.arange(corners) / corners
+    return resample(np.c_[np.cos(t), np.sin(t)], n)
+
+
+@pytest.mark.parametrize("name, source, target", [
+    ("circle", _circle(60), _circle(60)),
+    ("circle x1.02", _circle(60), 1.02 * _circle(60)),
+    ("ellipse", _circle(60, 1.5), _circle(60, 1.5)),
+    ("square", _polygon(4, 80), _polygon(4, 80)),
+    ("hexagon x1.03", _polygon(6, 60), 1.03 * _polygon(6, 60)),
+    ("ring, hole 10 % smaller", mm.Shape(np.r_[2 * _circle(60), _circle(60)[::-1]],
+                                         contours=(60, 60)),
+     mm.Shape(np.r_[2 * _circle(60), 0.9 * _circle(60)[::-1]], contours=(60, 60))),
+])
+def test_a_symmetric_shape_in_one_frame_is_not_turned(name, source, target):
+    """A symmetric outline onto itself, or nearly, in one frame: each node's partner is
+    the node at its place (the totals of its symmetric poses differ by rounding: the
+    pairs turned 120-180 degrees and the morph swung the shape round)."""
+    result = mm.morph(source, target)
+    x = getattr(source, "points", source)
+    y = getattr(target, "points", target)
+    pairs = result.matching.pairs
+    gap = np.linalg.norm(x[pairs[:, 0]] - y[pairs[:, 1]], axis=1)
+    assert np.median(gap) <= 0.1, name  # the scale's change at most (0.05 on the ring)
+    assert result.co_rotation is None
+
+
 def test_turned_shape_still_found():
     """A pose really turned (90 degrees) is still found by rotation='auto'; 'none' keeps
     the frame (and does worse here, as it should)."""

@@ -41,6 +41,20 @@ _COMMON_ANGLE = 20.0  # degrees: poses this near the identity are the common fra
 _SMALL_TURNS = (-10.0, 10.0)  # degrees, 2D common-frame poses besides the identity (not measured)
 _TURN_EVIDENCE = 7.5  # degrees: a turn below it is no turn (candidates 10 degrees apart)
 _COMMON_MARGIN = 2.0  # common frame / best total: shared hearts <= 1.51, turned hands >= 1.65
+# Or unless the common frame's pose places the source as near the target as the best pose
+# within _COMMON_GAP (RMS of both ways' nearest-node distances, 2D): common / best is
+# 0-1.00 for symmetric outlines in one frame (a circle, an ellipse, a square, a hexagon, a
+# ring onto themselves or x1.02: their totals differ by rounding, -6e-14 against 1e-15, or
+# 2.5x, and the pairs turned 120-180 deg), and where the totals chose a turn on 60 heart,
+# 146 hand and 248 glyph pairs turned 25-180 deg, at least 1.10 (glyph 'm' at 180 deg;
+# hands 1.42). In 3D the common frame's pose is the trimmed ICP from the identity without
+# a turn, and its score (squared distances) within _COMMON_GAP_3D of the best: symmetric
+# bodies stretched in one frame (trimesh's torus, cylinder, capsule, box, icosphere, cone
+# x [0.8, 1, 1.5] and 4 other stretches) at most 1.44 (the box; pairs turned 180 deg
+# before: torus, capsule, box); benchmarks/match3d.py's 6 shapes turned 30-180 deg
+# (base, cut, uneven, warp25; 1000 points) at least 1.78 (sampled unevenly), else 1.96.
+_COMMON_GAP = 1.05
+_COMMON_GAP_3D = 1.6
 # 3D point sets: trimmed nearest-point rounds (ICP) from many starts on few nodes, the
 # best few again on more nodes; the trimming distance shrinks from the size (normalised:
 # 1) to _TRIM coarse spacings. Measured on benchmarks/match3d.py, 1000 points, medians in
@@ -180,26 +194,40 @@ def _coarse_costs(p: Problem):
     if p.src.dim == 2:  # compiled, einsum's products added in its order: bitwise equal
         from ._dp import pose_costs
         D, low = pose_costs(rots, xc, yc, float(hc2), p.F[np.ix_(ci, cj)])
-        return D, low, ci, cj, near, evidence
+        return D, low, ci, cj, near, evidence, rots
     z = np.einsum("rab,ib->ria", rots, xc)
     zy = np.einsum("ria,ja->rij", z, yc)
     D = (np.sum(z**2, -1)[:, :, None] + np.sum(yc**2, -1)[None, None, :] - 2 * zy) / hc2
     D += p.F[np.ix_(ci, cj)]
-    return D, D.min(axis=2), ci, cj, near, evidence
+    return D, D.min(axis=2), ci, cj, near, evidence, rots
+
+
+def _as_near(z_common: np.ndarray, z_best: np.ndarray, y: np.ndarray) -> bool:
+    """Whether the source nodes placed by the common frame's pose, ``z_common``, lie as
+    near the target nodes ``y`` as placed by the best pose, ``z_best``, within
+    ``_COMMON_GAP``: the RMS of both ways' nearest-node distances, whatever the pairs (a
+    symmetric outline fits alike in its symmetric poses, and only the signatures'
+    rounding tells them apart)."""
+    def gap(z):
+        d_zy, d_yz = cKDTree(y).query(z)[0], cKDTree(z).query(y)[0]
+        return np.mean(d_zy**2) + np.mean(d_yz**2)
+
+    return bool(gap(z_common) <= _COMMON_GAP**2 * gap(z_best))
 
 
 def contour_pose(p: Problem) -> Pose:
     """Pose of an ordered contour: the cheapest rotation and target direction of the
     order-preserving search on the coarse nodes; with ``rotation="auto"`` the best
     common-frame pose unless another is cheaper by more than ``_COMMON_MARGIN``."""
-    C, low, ci, cj, near, evidence = _coarse_costs(p)
+    C, low, ci, cj, near, evidence, rots = _coarse_costs(p)
     repeat = REPEAT if len(ci) > len(cj) else np.inf
     total, Cb, reverse, r = _pose_search(C, low, np.arange(len(C)), p.closed, SKIP, repeat)
     rotate, common = p.rotation != "none", False
     if p.rotation == "auto":
-        total_near, Cn, rev_near = (total, Cb, reverse) if near[r] else _pose_search(
-            C, low, np.flatnonzero(near), p.closed, SKIP, repeat)[:3]
-        if total_near <= _COMMON_MARGIN * total:
+        total_near, Cn, rev_near, rn = (total, Cb, reverse, r) if near[r] else _pose_search(
+            C, low, np.flatnonzero(near), p.closed, SKIP, repeat)
+        x, y = p.src.normalized[ci], p.tgt.normalized[cj]
+        if total_near <= _COMMON_MARGIN * total or _as_near(x @ rots[rn].T, x @ rots[r].T, y):
             Cb, reverse, common, rotate = Cn, rev_near, evidence[r], False
     jj, _ = ordered_pairs(Cb, p.closed, SKIP, repeat)
     keep = jj >= 0
@@ -321,12 +349,21 @@ def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray, modal: Similarity) 
     totals = [trusted_pairs(costs, sim.apply(costs.x), sub)[1] for sim in close]
     best = int(np.argmin(totals))
     if p.rotation == "auto":  # the common frame, as in 2D: kept unless far costlier
-        turn = np.degrees(Rotation.from_matrix([s.rotation for s in close]).magnitude())
+        turn = [_turn(s) for s in close]
         near = [k for k in range(len(close)) if turn[k] <= _COMMON_ANGLE]
         if near and min(totals[k] for k in near) <= _COMMON_MARGIN * totals[best]:
             best = min(near, key=totals.__getitem__)
+        elif turn[best] > _COMMON_ANGLE:  # unless the common frame lies as near
+            still = _trimmed_icp(x, y, Similarity(np.eye(3), 1.0, np.zeros(3)), trim, False)
+            if still[0] <= _COMMON_GAP_3D * low:
+                close[best] = still[1]
     sim = _trimmed_icp(x, y, close[best], trim, rotate)[1]
     return Pose(sim, sim, False, rotate, False)
+
+
+def _turn(sim: Similarity) -> float:
+    """The angle of a 3D similarity's rotation, degrees."""
+    return float(np.degrees(Rotation.from_matrix(sim.rotation).magnitude()))
 
 
 def _rigid_rounds(costs: Costs, sub: np.ndarray, sim: Similarity, rotate: bool
@@ -353,7 +390,7 @@ def cloud_pose(p: Problem, costs: Costs, sub: np.ndarray) -> Pose:
 
 def _assignment_pose(p: Problem, costs: Costs, sub: np.ndarray) -> Pose:
     """The pose of :func:`cloud_pose` in 2D: by coarse assignments and rigid rounds."""
-    C, _, ci, cj, near, evidence = _coarse_costs(p)
+    C, _, ci, cj, near, evidence, _ = _coarse_costs(p)
     x, y = costs.x, costs.y
     rotate, common = p.rotation != "none", False
     tried = []
@@ -363,6 +400,8 @@ def _assignment_pose(p: Problem, costs: Costs, sub: np.ndarray) -> Pose:
     best = min(range(len(tried)), key=lambda r: tried[r][0])
     if p.rotation == "auto":
         near_best = min(np.flatnonzero(near), key=lambda r: tried[r][0])
-        if tried[near_best][0] <= _COMMON_MARGIN * tried[best][0]:
+        x = costs.x[sub]
+        if tried[near_best][0] <= _COMMON_MARGIN * tried[best][0] or _as_near(
+                tried[near_best][1].apply(x), tried[best][1].apply(x), costs.y):
             common, rotate, best = evidence[best], False, near_best
     return Pose(tried[best][1], tried[best][1], False, rotate, common)
