@@ -559,3 +559,21 @@ def test_an_exact_mirror_image_is_said_and_written(tmp_path):
     two = Shape(np.r_[ring, hole], contours=(120, 40))
     flipped = Shape(np.r_[ring, hole] * [-1.0, 1.0], contours=(120, 40))
     assert match(two, flipped).mirror is not None
+
+
+def test_reflected_problem_is_the_reflected_source_prepared():
+    """The mirror check's second match starts from the first's features reflected
+    (features.reflected): the source's modes with their x rows negated, its frequencies
+    and signature cost. They are what prepare() makes of the source reflected, up to each
+    mode's arbitrary sign (a hand, the most asymmetric outline here, onto another)."""
+    from modalmorph.matching.features import prepare, reflected
+
+    a, b = Shape(resample(load_hand(0), 90)), Shape(resample(load_hand(3), 80))
+    q = reflected(prepare(a, b, 24, None, "auto"), "free")
+    r = prepare(a.with_points(a.points * [-1.0, 1.0]), b, 24, None, "free")
+    assert_array_equal(q.src.points, r.src.points)
+    assert q.rotation == "free" and q.tgt is r.tgt
+    assert_allclose(q.freq, r.freq, rtol=1e-12)  # one eigenproblem, rounding apart
+    assert_allclose(q.F, r.F, rtol=1e-10, atol=1e-12)
+    signs = np.sign(np.einsum("iak,iak->k", q.phi, r.phi))
+    assert_allclose(q.phi, r.phi * signs, atol=1e-9)  # unit RMS per mode

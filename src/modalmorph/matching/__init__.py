@@ -64,10 +64,12 @@ from .contours import keep_partners, match_contours
 from .features import (
     FEATURE_SIGMA,
     MAX_MODEL_NODES,
+    Problem,
     affinity,
     fix_signs,
     modal_features,
     prepare,
+    reflected,
 )
 from .mirror import MIRROR, MIRROR_EXACT, MIRROR_SUSPECT, mirror_ratio
 from .pose import cloud_pose, contour_pose, surface_gap
@@ -263,11 +265,12 @@ class Matching:
         return self
 
 
-def _match_auto(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
-                ) -> tuple[np.ndarray, np.ndarray, Similarity, np.ndarray]:
-    """The default matcher; also returns where the fitted similarity and deformation take
-    every source node (the target's user coordinates), shape (m, d)."""
-    p = prepare(src, tgt, n_modes, opts.sigma, opts.rotation)
+def _match_auto(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions,
+                p: Problem | None = None) -> tuple[np.ndarray, np.ndarray, Similarity, np.ndarray]:
+    """The default matcher (on ``p``, :func:`prepare`'s problem, when given); also returns
+    where the fitted similarity and deformation take every source node (the target's user
+    coordinates), shape (m, d)."""
+    p = prepare(src, tgt, n_modes, opts.sigma, opts.rotation) if p is None else p
     sub = spread_indices(src, ALTERNATION_NODES)
     costs = Costs(src.normalized, tgt.normalized, p.F, tgt.spacing**2, p.ordered, p.closed)
     pose = contour_pose(p) if p.ordered else cloud_pose(p, costs, sub)
@@ -276,7 +279,7 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
         costs = replace(costs, y=costs.y[order], F=np.take(costs.F, order, axis=1))
     fit, final = fits(p, pose, costs, sub)
     placed = alternate(fit, pose.sim, pose.rotate)
-    if opts.rotation == "auto" and pose.common:
+    if p.rotation == "auto" and pose.common:
         placed = keep_or_turn(fit, final, placed, pose.turned)
     if src.dim == 3 and not p.ordered:
         placed = _nearer_surface(placed, pose.sim, costs, tgt.spacing)
@@ -285,6 +288,28 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
     pairs = np.c_[pairs[:, 0], order[pairs[:, 1]]]
     landed = tgt.to_user(z)
     return pairs, cost, align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]]), landed
+
+
+def _match_one(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
+               ) -> tuple[np.ndarray, np.ndarray, Similarity, float | None]:
+    """The default matcher, and :attr:`Matching.mirror` for 2D contours not held in one
+    frame (up to ``LARGE`` nodes from the first match's modal features, reflected)."""
+    large = max(src.m, tgt.m) > LARGE
+    if large:
+        pairs, cost, sim, _ = _match_large(src, tgt, n_modes, opts)
+    else:
+        p = prepare(src, tgt, n_modes, opts.sigma, opts.rotation)
+        pairs, cost, sim, _ = _match_auto(src, tgt, n_modes, opts, p)
+    if src.dim != 2 or not src.ordered or opts.rotation == "none":
+        return pairs, cost, sim, None
+
+    def again() -> Similarity:  # the source reflected, matched in any pose
+        free = opts.replace(rotation="free")
+        if large:
+            return _match_large(src.with_points(src.points * [-1.0, 1.0]), tgt, n_modes, free)[2]
+        q = reflected(p, "free")
+        return _match_auto(q.src, tgt, n_modes, free, q)[2]
+    return pairs, cost, sim, mirror_ratio(again, src, tgt, sim)
 
 
 def _nearer_surface(placed: Placement, sim: Similarity, costs: Costs, spacing: float
@@ -568,10 +593,7 @@ def match(source, target, *, options: MatchOptions | None = None, **overrides) -
         elif src.dim == 3 and not (src.ordered or tgt.ordered):
             pairs, cost, sim = _match_cloud(src, tgt, n_modes, opts)
         else:
-            matcher = _match_large if max(src.m, tgt.m) > LARGE else _match_auto
-            pairs, cost, sim, _ = matcher(src, tgt, n_modes, opts)
-            mirror = mirror_ratio(partial(matcher, n_modes=n_modes), src, tgt, opts, sim) \
-                if src.dim == 2 and src.ordered and opts.rotation != "none" else None
+            pairs, cost, sim, mirror = _match_one(src, tgt, n_modes, opts)
     order = np.argsort(pairs[:, 0], kind="stable")
     return Matching(pairs=pairs[order].astype(np.intp), cost=cost[order], method=opts.method,
                     modes=n_modes, sigma=opts.sigma, similarity=sim, nodes=(src.m, tgt.m),

@@ -19,7 +19,7 @@ from ..core.model import FEModel
 from ..core.shape import Shape, as_shape, resample, share, spread_indices
 
 __all__ = ["FEATURE_SIGMA", "MAX_MODEL_NODES", "modal_features", "fix_signs", "affinity",
-           "signature", "sq_dist", "Problem", "prepare"]
+           "signature", "sq_dist", "Problem", "prepare", "reflected"]
 
 # Nominal Gaussian width of the matching models, x mean node spacing; sigma=None uses it
 # where the Gram matrix stays well conditioned, else the largest width that does.
@@ -173,3 +173,13 @@ def prepare(src: Shape, tgt: Shape, n_modes: int, sigma: float | None,
     F *= _SIG_WEIGHT  # _SIG_WEIGHT * sq_dist / width, in place
     F /= sig1.shape[1]
     return Problem(src, tgt, phi1, w1, F, rotation)
+
+
+def reflected(p: Problem, rotation: str) -> Problem:
+    """:func:`prepare`'s problem for the source reflected (x -> -x) onto the same target,
+    from ``p``'s: the reflected model's matrices are the source's with the xy coupling
+    blocks negated, so its modes are the source's with their x rows negated (the same
+    frequencies) and its signatures, |phi|^2, and so ``F``, are the source's."""
+    flip = np.array([-1.0, 1.0])
+    return Problem(p.src.with_points(p.src.points * flip), p.tgt, p.phi * flip[:, None],
+                   p.freq, p.F, rotation)

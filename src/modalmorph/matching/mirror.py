@@ -11,7 +11,6 @@ from scipy.spatial.distance import cdist
 
 from ..core.align import Similarity
 from ..core.shape import Shape
-from ..options import MatchOptions
 
 __all__ = ["MIRROR", "MIRROR_EXACT", "MIRROR_SUSPECT", "mirror_ratio", "mirror_said"]
 
@@ -48,18 +47,17 @@ def _gap(x: np.ndarray, y: np.ndarray, sim: Similarity) -> float:
                          / np.mean(np.sum((y - y.mean(axis=0)) ** 2, axis=1))))
 
 
-def mirror_ratio(matcher, src: Shape, tgt: Shape, opts: MatchOptions,
-                 sim: Similarity) -> float | None:
+def mirror_ratio(again, src: Shape, tgt: Shape, sim: Similarity) -> float | None:
     """:attr:`Matching.mirror`: where the source placed by the pairs' similarity lies
     farther than ``MIRROR_SUSPECT`` from the target (:func:`_gap`), the source reflected
-    (x -> -x) is matched again in any pose (``rotation="free"``), and the ratio of the two
-    gaps returned where it exceeds ``MIRROR`` (at most ``1 / MIRROR_EXACT``: an exact
-    mirror image); else None."""
+    (x -> -x; any reflection is this one turned) is matched again in any pose
+    (``again()``: its similarity onto the target, ``rotation="free"``), and the ratio of
+    the two gaps returned where it exceeds ``MIRROR`` (at most ``1 / MIRROR_EXACT``: an
+    exact mirror image); else None."""
     g0 = _gap(src.points, tgt.points, sim)
     if not g0 > MIRROR_SUSPECT:
         return None
-    ref = src.with_points(src.points * [-1.0, 1.0])  # any reflection: this, turned
-    g1 = _gap(ref.points, tgt.points, matcher(ref, tgt, opts=opts.replace(rotation="free"))[2])
+    g1 = _gap(src.points * [-1.0, 1.0], tgt.points, again())
     if not g0 > MIRROR * g1:
         return None
     ratio = float(g0 / max(g1, MIRROR_EXACT * g0))
