@@ -11,7 +11,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from .affine import affine_fit_weights
-from .surfaces import closest_on_faces
+from .surfaces import closest_on_band, closest_on_faces
 
 __all__ = ["Newmark", "lifted", "LoadTargets", "ContourLoads", "contour_partners", "check_newmark",
            "UNMATCHED_RULES", "CARRIERS", "AFFINE_CARRIERS"]
@@ -135,8 +135,8 @@ class LoadTargets:
             self._groups = [("carry", un, nb)]
         self._flatten()
         if faces is not None:
-            self._fixed = [(nodes, closest_on_faces(at, target, faces))
-                           for nodes, at in self._fixed]
+            onto = closest_on_band if m > len(target) else closest_on_faces
+            self._fixed = [(nodes, onto(at, target, faces)) for nodes, at in self._fixed]
 
     @property
     def pairs(self) -> np.ndarray:

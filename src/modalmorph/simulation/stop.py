@@ -20,7 +20,7 @@ from scipy.spatial import cKDTree
 
 from ..core.quality import Polyline
 from ..core.shape import CURVE_DIMENSION, Shape, curve_dimension, even_subset, resample
-from ..core.surfaces import face_distances, face_tree
+from ..core.surfaces import closest_on_band, face_distances, face_tree
 from ..options import MorphOptions
 
 __all__ = ["COARSE_FLOOR", "COVER_NEIGHBOUR", "ContourStop", "CurveStop", "LAZY_SPACINGS",
@@ -241,6 +241,7 @@ class SurfaceStop(StopTest):
             left = float(to_surface(target, sample, tree).mean())
             self.coarse = max(left - self.floor, 0.0)
         self.source_faces = source_faces if m is not None and m >= len(target) else None
+        self.band = faces is not None and m is not None and m > len(target)
         quadrics = faces is None or self.source_faces is None  # whose floor hides
         self.pairs = quadrics and self.floor > COARSE_FLOOR * limits.tolerance
 
@@ -250,6 +251,9 @@ class SurfaceStop(StopTest):
         Y = self.target
         if self.faces is None:
             d_ab = float(to_surface(current, Y, self.tree).mean()) - self.floor
+        elif self.band:
+            d_ab = float(np.linalg.norm(current - closest_on_band(
+                current, Y, self.faces, self.face_tree), axis=1).mean())
         else:
             d_ab = float(face_distances(current, Y, self.faces, self.face_tree).mean())
         if self.source_faces is None:
