@@ -316,3 +316,24 @@ def test_pairs_that_share_their_partners_are_said_unlike():
     assert "only 81 distinct target nodes of 162" in unlike_sentence(shared, m, n)
     assert unlike_sentence(np.c_[np.arange(m), np.arange(m)], m, n) == ""
     assert unlike_sentence(np.c_[np.arange(642), np.arange(642) % 162], 642, 162) == ""
+
+
+def test_pairs_whose_surfaces_face_apart_are_found():
+    """An icosphere paired with itself turned, a tenth of its pairs sent to the antipode:
+    those (and only those) face apart, whichever way either surface is wound; with half
+    the faces wound the other way round the normals say nothing (FACING_SHARE)."""
+    b, fb = icosphere(2)
+    target = TURN.apply(b)
+    pairs = np.c_[np.arange(162), np.arange(162)]
+    antipode = cKDTree(b).query(-b)[1]
+    wrong = np.arange(0, 162, 10)
+    pairs[wrong, 1] = antipode[wrong]
+    rotation = TURN.as_matrix()
+    for faces in (fb, fb[:, ::-1]):
+        apart = surfaces.facing_apart((b, fb), (target, faces), pairs, rotation)
+        np.testing.assert_array_equal(np.flatnonzero(apart), wrong)
+    mixed = fb.copy()
+    mixed[::2] = mixed[::2, ::-1]
+    assert not surfaces.facing_apart((b, mixed), (target, fb), pairs, rotation).any()
+    normals = surfaces.vertex_normals(b, fb)
+    assert np.einsum("ij,ij->i", normals, b).min() > 0.99  # outward, unit
