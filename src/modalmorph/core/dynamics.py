@@ -89,7 +89,10 @@ class LoadTargets:
         pulled to the closest point of them to where their neighbours carry them, on the
         target's surface, not off it between its vertices (a sphere of 642 vertices onto
         an ellipsoid of 162 with the true pairs stopped 1.7 tolerances off its faces,
-        converged on them, method.md §5).
+        converged on them, method.md §5); of a target of fewer nodes than the source, to
+        the closest point of the band between its faces and the smooth surface through
+        its vertices (:func:`~modalmorph.core.surfaces.closest_on_band`), where the
+        smooth surface lies 1.2-2 tolerances off its chords (an ellipsoid of 162).
     """
 
     def __init__(self, source, target, pairs, *, ordered: bool, closed: tuple[bool, bool],

@@ -214,10 +214,14 @@ class SurfaceStop(StopTest):
     faces are their triangles: the shape's distance to a target with ``faces`` is to
     them, exact, with no floor (the quadrics of a coarse target's vertices pass off its
     faces: a sphere of 642 vertices said converged on an ellipsoid of 162 lay 2
-    tolerances off its faces, method.md §5); the target's vertices' to the shape, when
-    the source has ``source_faces`` and is not coarser than the target, is to the
-    shape's faces less ``floor`` (a smooth shape may round a coarse target's corners by
-    as much as they stand off a smooth surface through their neighbours). With ``lazy``
+    tolerances off its faces, method.md §5), and for a target of fewer vertices than the
+    source (``band``) to the band between its faces and the smooth surface through its
+    vertices (:func:`~modalmorph.core.surfaces.closest_on_band`: that sphere mapped
+    exactly onto the ellipsoid stands 1.6 tolerances off its faces); the target's
+    vertices' to the shape, when the source has ``source_faces`` and is not coarser
+    than the target, is to the shape's faces less ``floor`` (a smooth shape may round a
+    coarse target's corners by as much as they stand off a smooth surface through their
+    neighbours). With ``lazy``
     the surfaces are measured only once ``near`` is within ``gate``, the tolerance plus
     ``LAZY_SPACINGS`` target spacings."""
 
