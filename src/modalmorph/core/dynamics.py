@@ -86,13 +86,10 @@ class LoadTargets:
         The rule for unmatched nodes of a contour (above).
     faces : ndarray of int, shape (f, 3), optional
         The target's triangles, for a 3D point set or surface: its carried nodes are
-        pulled to the closest point of them to where their neighbours carry them, on the
-        target's surface, not off it between its vertices (a sphere of 642 vertices onto
-        an ellipsoid of 162 with the true pairs stopped 1.7 tolerances off its faces,
-        converged on them, method.md §5); of a target of fewer nodes than the source, to
-        the closest point of the band between its faces and the smooth surface through
-        its vertices (:func:`~modalmorph.core.surfaces.closest_on_band`), where the
-        smooth surface lies 1.2-2 tolerances off its chords (an ellipsoid of 162).
+        pulled to the closest point of them (of a coarser target, of the band between
+        them and the smooth surface through its vertices: ``closest_on_band``) to where
+        their neighbours carry them, on the target's surface, not off it between its
+        vertices (method.md §5).
     """
 
     def __init__(self, source, target, pairs, *, ordered: bool, closed: tuple[bool, bool],
