@@ -11,7 +11,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from .affine import affine_fit_weights
-from .surfaces import closest_on_faces
+from .surfaces import closest_on_band, closest_on_faces
 
 __all__ = ["Newmark", "lifted", "LoadTargets", "ContourLoads", "contour_partners", "check_newmark",
            "UNMATCHED_RULES", "CARRIERS", "AFFINE_CARRIERS"]
@@ -86,10 +86,10 @@ class LoadTargets:
         The rule for unmatched nodes of a contour (above).
     faces : ndarray of int, shape (f, 3), optional
         The target's triangles, for a 3D point set or surface: its carried nodes are
-        pulled to the closest point of them to where their neighbours carry them, on the
-        target's surface, not off it between its vertices (a sphere of 642 vertices onto
-        an ellipsoid of 162 with the true pairs stopped 1.7 tolerances off its faces,
-        converged on them, method.md §5).
+        pulled to the closest point of them (of a coarser target, of the band between
+        them and the smooth surface through its vertices: ``closest_on_band``) to where
+        their neighbours carry them, on the target's surface, not off it between its
+        vertices (method.md §5).
     """
 
     def __init__(self, source, target, pairs, *, ordered: bool, closed: tuple[bool, bool],
@@ -135,8 +135,8 @@ class LoadTargets:
             self._groups = [("carry", un, nb)]
         self._flatten()
         if faces is not None:
-            self._fixed = [(nodes, closest_on_faces(at, target, faces))
-                           for nodes, at in self._fixed]
+            onto = closest_on_band if m > len(target) else closest_on_faces
+            self._fixed = [(nodes, onto(at, target, faces)) for nodes, at in self._fixed]
 
     @property
     def pairs(self) -> np.ndarray:

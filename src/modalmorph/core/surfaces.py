@@ -16,8 +16,9 @@ import logging
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["FACE_CANDIDATES", "DISTINCT_PARTNERS", "TURN_HINT", "closest_on_faces",
-           "face_distances", "face_tree", "self_intersecting_faces",
+__all__ = ["FACE_CANDIDATES", "DISTINCT_PARTNERS", "FACING_SHARE", "TURN_HINT",
+           "closest_on_band", "closest_on_faces", "face_distances", "face_tree",
+           "facing_apart", "self_intersecting_faces", "vertex_normals",
            "step_self_intersections", "intersection_sentence", "unlike_sentence"]
 
 log = logging.getLogger(__name__)
@@ -42,6 +43,40 @@ TURN_HINT = 90.0
 # icosphere onto an ellipsoid at another resolution 1.00; trimesh's primitives onto one
 # another (--primitives; none converges) 0.21-0.56, but sphere <-> box 0.83-0.89.
 DISTINCT_PARTNERS = 0.75
+# Above this share of pairs whose surfaces face apart the normals say nothing (faces wound
+# inconsistently): none is released (:func:`facing_apart`). benchmarks/morph3d.py
+# --surfaces, the matcher's pairs: the skimage blobs 0.035 (100 of its 258 pairs more
+# than a spacing from the truth, 14 of the 3005 nearer), every other case at most 0.001.
+FACING_SHARE = 0.25
+
+
+def vertex_normals(vertices, faces) -> np.ndarray:
+    """Unit normals (m, 3) of a triangle surface's vertices: the sums of their faces'
+    normals weighted by area, oriented as the faces are wound."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces)
+    tri = vertices[faces]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # 2 area x normal
+    out = np.zeros_like(vertices)
+    for corner in range(3):
+        np.add.at(out, faces[:, corner], cross)
+    return out / np.maximum(np.linalg.norm(out, axis=1), 1e-300)[:, None]
+
+
+def facing_apart(source, target, pairs: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+    """Which pairs (K,) of two surfaces (``source``, ``target``: ``(points, faces)``)
+    face apart: the source vertex's normal turned by ``rotation`` (3, 3) (the pairs') and
+    its partner's more than 90 degrees apart. Such a pair pulls the surface inside out
+    (on the skimage blobs of benchmarks/morph3d.py, partners across a tube: the morph
+    stopped 1.02 tolerances off, 0.99 and converged without them). The surfaces' windings
+    may differ (most pairs facing apart then agree); above ``FACING_SHARE`` of pairs
+    facing apart none is said to (faces wound inconsistently)."""
+    turned = vertex_normals(*source)[pairs[:, 0]] @ np.asarray(rotation).T
+    cosine = np.einsum("ij,ij->i", turned, vertex_normals(*target)[pairs[:, 1]])
+    if np.median(cosine) < 0:  # wound the other way round
+        cosine = -cosine
+    apart = cosine < 0
+    return apart if apart.mean() <= FACING_SHARE else np.zeros_like(apart)
 
 
 def face_tree(vertices, faces) -> cKDTree:
@@ -61,12 +96,18 @@ def closest_on_faces(points, vertices, faces, tree: cKDTree | None = None) -> np
     closest point on a triangle, over the ``FACE_CANDIDATES`` faces whose centroids are
     nearest). ``tree``: :func:`face_tree` of the surface, when one is kept for several
     calls."""
+    return _closest_faces(points, vertices, faces, tree)[0]
+
+
+def _closest_faces(points, vertices, faces, tree: cKDTree | None = None):
+    """:func:`closest_on_faces` and the index (p,) of the face each closest point is on."""
     points = np.asarray(points, dtype=np.float64)
     tri = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]  # (f, 3, 3)
     if tree is None:
         tree = cKDTree(tri.mean(axis=1))
     k = min(FACE_CANDIDATES, len(tri))
     out = np.empty_like(points)
+    which = np.empty(len(points), dtype=np.intp)
     for b in range(0, len(points), BLOCK):
         p = points[b:b + BLOCK]
         cand = tree.query(p, k=k)[1].reshape(len(p), k)
@@ -74,6 +115,72 @@ def closest_on_faces(points, vertices, faces, tree: cKDTree | None = None) -> np
         best = best.reshape(len(p), k, 3)
         pick = np.argmin(np.sum((best - p[:, None]) ** 2, axis=2), axis=1)
         out[b:b + BLOCK] = best[np.arange(len(p)), pick]
+        which[b:b + BLOCK] = cand[np.arange(len(p)), pick]
+    return out, which
+
+
+def closest_on_band(points, vertices, faces, tree: cKDTree | None = None) -> np.ndarray:
+    """The closest point (p, 3) of a coarse triangle surface *at its resolution* to every
+    point: of the band between its faces (chords) and the smooth surface through its
+    vertices, the curved point-normal triangles of Vlachos et al. (2001) over the faces
+    (vertex normals: the main axis of the incident faces' area-weighted normals, of
+    either sign, as the patches need): from the closest point of the faces along the
+    face's normal up to the patch's height there. A finer surface on the smooth one stands off the
+    faces by their sagitta (an icosphere of 642 vertices mapped onto the ellipsoid
+    through one of 162: 1.6 tolerances on average; method.md §5); one on the faces or on
+    the patches is on the band, and one beyond either is as far from it."""
+    points = np.asarray(points, dtype=np.float64)
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces)
+    on, face = _closest_faces(points, vertices, faces, tree)
+    tri = vertices[faces[face]]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
+    height = np.einsum("ij,ij->i", _patch_offsets(on, face, vertices, faces), normal)
+    along = np.einsum("ij,ij->i", points - on, normal)
+    return on + np.clip(along, np.minimum(height, 0), np.maximum(height, 0))[:, None] * normal
+
+
+def _vertex_axes(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """A unit normal (m, 3) at every vertex: the main axis of the area-weighted normals
+    of its faces, sign-free (a scan's faces may be wound either way)."""
+    tri = vertices[faces]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # 2 area x normal
+    area = np.linalg.norm(cross, axis=1)
+    outer = np.einsum("fi,fj->fij", cross, cross) / np.maximum(area, 1e-300)[:, None, None]
+    scatter = np.zeros((len(vertices), 3, 3))
+    for corner in range(3):
+        np.add.at(scatter, faces[:, corner], outer)
+    return np.linalg.eigh(scatter)[1][:, :, -1]
+
+
+def _patch_offsets(on: np.ndarray, face: np.ndarray, vertices: np.ndarray,
+                   faces: np.ndarray) -> np.ndarray:
+    """The offset (p, 3) from points ``on`` faces ``face`` to the point-normal triangle
+    (Vlachos et al. 2001) over that face at the same barycentric coordinates: the cubic
+    patch through the face's vertices, tangent there to the planes of their normals."""
+    normal = _vertex_axes(vertices, faces)
+    corner = faces[face]  # (p, 3)
+    P, N = vertices[corner], normal[corner]  # (p, 3, 3): corner, coordinate
+    e1, e2, q = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0], on - P[:, 0]
+    gram = np.stack([np.einsum("ij,ij->i", e1, e1), np.einsum("ij,ij->i", e1, e2),
+                     np.einsum("ij,ij->i", e2, e2)])
+    rhs = np.stack([np.einsum("ij,ij->i", q, e1), np.einsum("ij,ij->i", q, e2)])
+    det = gram[0] * gram[2] - gram[1] ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = np.nan_to_num((gram[2] * rhs[0] - gram[1] * rhs[1]) / det)
+        w = np.nan_to_num((gram[0] * rhs[1] - gram[1] * rhs[0]) / det)
+    bary = np.stack([1 - v - w, v, w], axis=1)  # (p, 3)
+
+    def lift(i, j):  # the control point b_iij's offset from the flat triangle's
+        return -np.einsum("pk,pk->p", P[:, j] - P[:, i], N[:, i])[:, None] * N[:, i] / 3
+
+    edges = [(i, j) for i in range(3) for j in range(3) if i != j]
+    lifts = {e: lift(*e) for e in edges}
+    centre = 1.5 * sum(lifts.values()) / 6  # b_111's offset: E + (E - V) / 2
+    out = 6 * np.prod(bary, axis=1)[:, None] * centre
+    for i, j in edges:
+        out += 3 * (bary[:, i] ** 2 * bary[:, j])[:, None] * lifts[i, j]
     return out
 
 

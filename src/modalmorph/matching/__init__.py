@@ -54,6 +54,7 @@ from ..core.align import Similarity, align
 from ..core.dynamics import contour_partners
 from ..core.quality import check_contours
 from ..core.shape import Shape, as_shape, check_pairs, even_subset, spread_indices
+from ..core.surfaces import facing_apart
 from ..errors import OptionError, ShapeError
 from ..options import METHODS, ROTATIONS, MatchOptions
 from ..threads import blas_threads, limit
@@ -371,6 +372,11 @@ def _match_cloud(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
     reject = _REJECT if opts.reject is None else opts.reject
     keep = cost <= reject
     pairs = np.c_[np.flatnonzero(keep), j[keep]]
+    if src.has_faces and tgt.has_faces and len(pairs) > 2:  # not inside out (FACING_SHARE)
+        apart = facing_apart((src.points, src.faces), (tgt.points, tgt.faces), pairs,
+                             align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]]).rotation)
+        keep[pairs[apart, 0]] = False
+        pairs = pairs[~apart]
     if len(pairs) < 2:  # nothing to align by
         raise ShapeError(
             f"only {len(pairs)} of the source's {src.m} nodes land within {np.sqrt(reject):.3g} "

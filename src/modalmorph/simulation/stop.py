@@ -20,7 +20,7 @@ from scipy.spatial import cKDTree
 
 from ..core.quality import Polyline
 from ..core.shape import CURVE_DIMENSION, Shape, curve_dimension, even_subset, resample
-from ..core.surfaces import face_distances, face_tree
+from ..core.surfaces import closest_on_band, face_distances, face_tree
 from ..options import MorphOptions
 
 __all__ = ["COARSE_FLOOR", "COVER_NEIGHBOUR", "ContourStop", "CurveStop", "LAZY_SPACINGS",
@@ -214,10 +214,14 @@ class SurfaceStop(StopTest):
     faces are their triangles: the shape's distance to a target with ``faces`` is to
     them, exact, with no floor (the quadrics of a coarse target's vertices pass off its
     faces: a sphere of 642 vertices said converged on an ellipsoid of 162 lay 2
-    tolerances off its faces, method.md §5); the target's vertices' to the shape, when
-    the source has ``source_faces`` and is not coarser than the target, is to the
-    shape's faces less ``floor`` (a smooth shape may round a coarse target's corners by
-    as much as they stand off a smooth surface through their neighbours). With ``lazy``
+    tolerances off its faces, method.md §5), and for a target of fewer vertices than the
+    source (``band``) to the band between its faces and the smooth surface through its
+    vertices (:func:`~modalmorph.core.surfaces.closest_on_band`: that sphere mapped
+    exactly onto the ellipsoid stands 1.6 tolerances off its faces); the target's
+    vertices' to the shape, when the source has ``source_faces`` and is not coarser
+    than the target, is to the shape's faces less ``floor`` (a smooth shape may round a
+    coarse target's corners by as much as they stand off a smooth surface through their
+    neighbours). With ``lazy``
     the surfaces are measured only once ``near`` is within ``gate``, the tolerance plus
     ``LAZY_SPACINGS`` target spacings."""
 
@@ -241,6 +245,7 @@ class SurfaceStop(StopTest):
             left = float(to_surface(target, sample, tree).mean())
             self.coarse = max(left - self.floor, 0.0)
         self.source_faces = source_faces if m is not None and m >= len(target) else None
+        self.band = faces is not None and m is not None and m > len(target)
         quadrics = faces is None or self.source_faces is None  # whose floor hides
         self.pairs = quadrics and self.floor > COARSE_FLOOR * limits.tolerance
 
@@ -250,6 +255,9 @@ class SurfaceStop(StopTest):
         Y = self.target
         if self.faces is None:
             d_ab = float(to_surface(current, Y, self.tree).mean()) - self.floor
+        elif self.band:
+            d_ab = float(np.linalg.norm(current - closest_on_band(
+                current, Y, self.faces, self.face_tree), axis=1).mean())
         else:
             d_ab = float(face_distances(current, Y, self.faces, self.face_tree).mean())
         if self.source_faces is None:
