@@ -328,12 +328,11 @@ def test_pairs_whose_surfaces_face_apart_are_found():
     antipode = cKDTree(b).query(-b)[1]
     wrong = np.arange(0, 162, 10)
     pairs[wrong, 1] = antipode[wrong]
-    rotation = TURN.as_matrix()
     for faces in (fb, fb[:, ::-1]):
-        apart = surfaces.facing_apart((b, fb), (target, faces), pairs, rotation)
+        apart = surfaces.facing_apart((b, fb), (target, faces), pairs)
         np.testing.assert_array_equal(np.flatnonzero(apart), wrong)
     mixed = fb.copy()
     mixed[::2] = mixed[::2, ::-1]
-    assert not surfaces.facing_apart((b, mixed), (target, fb), pairs, rotation).any()
+    assert not surfaces.facing_apart((b, mixed), (target, fb), pairs).any()
     normals = surfaces.vertex_normals(b, fb)
     assert np.einsum("ij,ij->i", normals, b).min() > 0.99  # outward, unit

@@ -16,6 +16,8 @@ import logging
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .align import align
+
 __all__ = ["FACE_CANDIDATES", "DISTINCT_PARTNERS", "FACING_SHARE", "TURN_HINT",
            "closest_on_band", "closest_on_faces", "face_distances", "face_tree",
            "facing_apart", "self_intersecting_faces", "vertex_normals",
@@ -63,15 +65,16 @@ def vertex_normals(vertices, faces) -> np.ndarray:
     return out / np.maximum(np.linalg.norm(out, axis=1), 1e-300)[:, None]
 
 
-def facing_apart(source, target, pairs: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+def facing_apart(source, target, pairs: np.ndarray) -> np.ndarray:
     """Which pairs (K,) of two surfaces (``source``, ``target``: ``(points, faces)``)
-    face apart: the source vertex's normal turned by ``rotation`` (3, 3) (the pairs') and
-    its partner's more than 90 degrees apart. Such a pair pulls the surface inside out
+    face apart: the source vertex's normal turned by the pairs' rotation and its
+    partner's more than 90 degrees apart. Such a pair pulls the surface inside out
     (on the skimage blobs of benchmarks/morph3d.py, partners across a tube: the morph
     stopped 1.02 tolerances off, 0.99 and converged without them). The surfaces' windings
     may differ (most pairs facing apart then agree); above ``FACING_SHARE`` of pairs
     facing apart none is said to (faces wound inconsistently)."""
-    turned = vertex_normals(*source)[pairs[:, 0]] @ np.asarray(rotation).T
+    rotation = align(source[0][pairs[:, 0]], target[0][pairs[:, 1]]).rotation
+    turned = vertex_normals(*source)[pairs[:, 0]] @ rotation.T
     cosine = np.einsum("ij,ij->i", turned, vertex_normals(*target)[pairs[:, 1]])
     if np.median(cosine) < 0:  # wound the other way round
         cosine = -cosine

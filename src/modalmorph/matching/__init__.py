@@ -27,14 +27,14 @@ the rest, in the order of the default search:
     The modal model of each object, its features (:func:`modal_features`), the affinity
     (8) and the signatures with their cost (``prepare``).
 :mod:`~modalmorph.matching.search`
-    The searches: mutual best and rejection (the paper's), the order-preserving dynamic
-    programme and the assignment over the cost of a placed source, trusted pairs, the
-    final pairs (``final_pairs``).
+    The searches: mutual best (the paper's), the order-preserving programme and the
+    assignment over a placed source's cost, trusted pairs, the final pairs.
 :mod:`~modalmorph.matching.pose`
     The pose search and the common-frame decision (``contour_pose``, ``cloud_pose``).
 :mod:`~modalmorph.matching.alternation`
-    Search, alignment and deformation in turn (``fits``, ``alternate``,
-    ``keep_or_turn``).
+    Search, alignment and deformation in turn (``fits``, ``alternate``, ``keep_or_turn``).
+:mod:`~modalmorph.matching.mirror`
+    Whether a 2D target looks like the source's mirror image (``mirror_ratio``).
 :mod:`~modalmorph.matching.coherent`
     The coherent pass of contours, which settles the along-contour position (``settle``).
 :mod:`~modalmorph.matching.clouds`
@@ -157,8 +157,8 @@ CHOICE_NODES = 10_000
 # 2.30; bunny resampled 1.22 / 1.09 / 1.15 / 1.12 -> 1.20 / 1.07 / 1.14 / 1.11; base (the
 # target the source's points moved) blob 0.98 / 0.84 / 0.93 / 0.87 -> 0.96 / 0.84 / 0.94 /
 # 0.91, bunny 0.83-0.84 unchanged; same CPU time. The similarity as its target, at 0 deg:
-# 0.01 / 0.02 / 0.05: 2.03 / 1.88 / 2.41; at
-# every level: 2.00; the subsets' or the refinement's first level alone: 2.00 / 2.14.
+# 0.01 / 0.02 / 0.05: 2.03 / 1.88 / 2.41; at every level: 2.00; the subsets' or the
+# refinement's first level alone: 2.00 / 2.14.
 POSE_DECAY = 0.02
 # refine (_refined) starts from the coarse landing only where, after its first level, that
 # lies nearer the target's surface than this x the rigid pose's (coherent.rigid_pose: the
@@ -296,11 +296,9 @@ def _match_one(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
     """The default matcher, and :attr:`Matching.mirror` for 2D contours not held in one
     frame (up to ``LARGE`` nodes from the first match's modal features, reflected)."""
     large = max(src.m, tgt.m) > LARGE
-    if large:
-        pairs, cost, sim, _ = _match_large(src, tgt, n_modes, opts)
-    else:
-        p = prepare(src, tgt, n_modes, opts.sigma, opts.rotation)
-        pairs, cost, sim, _ = _match_auto(src, tgt, n_modes, opts, p)
+    p = None if large else prepare(src, tgt, n_modes, opts.sigma, opts.rotation)
+    pairs, cost, sim, _ = _match_large(src, tgt, n_modes, opts) if large else \
+        _match_auto(src, tgt, n_modes, opts, p)
     if src.dim != 2 or not src.ordered or opts.rotation == "none":
         return pairs, cost, sim, None
 
@@ -320,11 +318,9 @@ def _nearer_surface(placed: Placement, sim: Similarity, costs: Costs, spacing: f
     distances capped at ``_GAP_TRIM`` target spacings): the alternation's one-to-one
     assignments drag the source towards where a target sampled unevenly is dense, or
     over a part that the target lacks."""
-    trim, posed, tree = _GAP_TRIM * spacing, sim.apply(costs.x), cKDTree(costs.y)
-    if surface_gap(posed, costs.y, trim, tree=tree) < surface_gap(placed.z, costs.y, trim,
-                                                                  tree=tree):
-        return Placement(sim, posed)
-    return placed
+    posed = sim.apply(costs.x)
+    gap = partial(surface_gap, y=costs.y, trim=_GAP_TRIM * spacing, tree=cKDTree(costs.y))
+    return Placement(sim, posed) if gap(posed) < gap(placed.z) else placed
 
 
 def _match_large(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions,
@@ -373,10 +369,8 @@ def _match_cloud(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
     keep = cost <= reject
     pairs = np.c_[np.flatnonzero(keep), j[keep]]
     if src.has_faces and tgt.has_faces and len(pairs) > 2:  # not inside out (FACING_SHARE)
-        apart = facing_apart((src.points, src.faces), (tgt.points, tgt.faces), pairs,
-                             align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]]).rotation)
-        keep[pairs[apart, 0]] = False
-        pairs = pairs[~apart]
+        apart = facing_apart((src.points, src.faces), (tgt.points, tgt.faces), pairs)
+        keep[pairs[apart, 0]], pairs = False, pairs[~apart]
     if len(pairs) < 2:  # nothing to align by
         raise ShapeError(
             f"only {len(pairs)} of the source's {src.m} nodes land within {np.sqrt(reject):.3g} "
