@@ -313,6 +313,21 @@ def check_contours(shape, name: str) -> None:
                shape.closed, shape.contours)
 
 
+def crossed_contours(shape) -> tuple[list[int], list[tuple[int, int]]]:
+    """What :func:`check_contours` refuses in a 2D ordered :class:`Shape`: the contours
+    that cross themselves beyond tiny loops, and the pairs of contours that cross."""
+    own = [k for k, rows in enumerate(shape.slices)
+           if next(_folds(shape.points[rows], crossing_segments(shape.points[rows],
+                                                                shape.closed),
+                          shape.closed), None) is not None]
+    both = set()
+    if len(shape.sizes) > 1:
+        part = shape.contour_of[shape.edges[:, 0]]
+        both = {(int(part[i]), int(part[j])) for i, j in
+                crossing_segments(shape.points, edges=shape.edges) if part[i] != part[j]}
+    return own, sorted(both)
+
+
 def _check_contours(shape, name: str) -> None:
     if len(shape.sizes) == 1:
         check_simple(shape.points, name, shape.closed)

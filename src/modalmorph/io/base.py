@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.quality import check_flat
+from ..core.quality import check_flat, crossed_contours
 from ..core.shape import ImageFrame, Shape, resample, share
 from ..errors import InputFileError, ShapeError
 from ..options import ReadOptions
@@ -140,20 +140,55 @@ def make_shape(name, pts, *, faces=None, nodes=None, closed=True, frame=None,
             raise InputFileError(str(exc)) from None
     try:
         if nodes is not None:
-            pts, contours = _resampled(pts, int(nodes), bool(closed), contours)
+            pts, contours = _resampled(name, pts, int(nodes), bool(closed), contours)
         return Shape(pts, closed=bool(closed), faces=faces, frame=frame, contours=contours)
     except ValueError as exc:
         raise InputFileError(f"{name}: {exc}") from None
 
 
-def _resampled(pts, nodes: int, closed: bool, contours) -> tuple[np.ndarray, tuple | None]:
-    """Every contour resampled by arc length, ``nodes`` shared among them by length."""
-    if contours is None or len(contours) == 1:
-        return resample(pts, nodes, closed=closed), None
+def _resampled(name: str, pts, nodes: int, closed: bool, contours
+               ) -> tuple[np.ndarray, tuple | None]:
+    """Every contour resampled by arc length, ``nodes`` shared among them by length. At
+    a detail finer than the node spacing (logged): a contour that then crosses itself
+    (a thin hole of 10 nodes) gets twice its nodes, up to its own count; of two that
+    cross (a hole a pixel inside the outline), the shorter is dropped."""
     whole = Shape(pts, closed=closed, contours=contours)
-    dense = [resample(pts[r], nodes, closed=closed) for r in whole.slices]  # share caps a
-    counts = share(Shape(np.vstack(dense), closed=closed,  # contour's count at its nodes
-                         contours=(nodes,) * len(dense)), nodes)
-    parts = [resample(pts[r], c, closed=closed)
-             for r, c in zip(whole.slices, counts, strict=True)]
-    return np.vstack(parts), tuple(counts)
+    keep, grown, dropped = list(range(len(whole.sizes))), {}, []
+    while True:
+        counts = _shared(whole, keep, nodes)
+        counts = [max(c, grown.get(k, 0)) for k, c in zip(keep, counts, strict=True)]
+        parts = [resample(pts[whole.slices[k]], c, closed=closed)
+                 for k, c in zip(keep, counts, strict=True)]
+        own, both = crossed_contours(Shape(np.vstack(parts), closed=closed,
+                                           contours=tuple(counts)))
+        own = [i for i in own if counts[i] < whole.sizes[keep[i]]]
+        for i in own:
+            grown[keep[i]] = min(2 * counts[i], whole.sizes[keep[i]])
+        worse = {min(pair, key=lambda i: counts[i]) for pair in both} if not own else ()
+        if not own and not worse:
+            break
+        dropped += [keep[i] for i in worse]
+        keep = [k for i, k in enumerate(keep) if i not in worse]
+    if grown or dropped:
+        _log.info("%s: resampled to %d nodes, %s%s%s (details finer than the node spacing; "
+                  "nodes=N for another count)", name, nodes,
+                  f"contour(s) {_listed(grown)} crossed themselves: given more nodes, "
+                  f"{sum(counts)} in all" if grown else "", "; " if grown and dropped else "",
+                  f"contour(s) {_listed(dropped)} crossed another: dropped" if dropped else "")
+    return np.vstack(parts), (tuple(counts) if len(counts) > 1 else None)
+
+
+def _shared(whole: Shape, keep: list, nodes: int) -> list[int]:
+    """``nodes`` shared by length among the contours ``keep`` of ``whole``, each at most
+    its count resampled densely."""
+    if len(keep) == 1:
+        return [nodes]
+    dense = [resample(whole.points[whole.slices[k]], nodes, closed=whole.closed) for k in keep]
+    return share(Shape(np.vstack(dense), closed=whole.closed,
+                       contours=(nodes,) * len(dense)), nodes)
+
+
+def _listed(numbers) -> str:
+    return ", ".join(map(str, sorted(numbers)))
+
+
