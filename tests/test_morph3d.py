@@ -147,3 +147,18 @@ def test_morph_says_self_intersections(monkeypatch):
     assert r.steps > 0 and r.self_intersections[0] == 0
     assert (f"{r.steps} of {r.steps + 1} steps' surfaces intersect themselves (up to 3 "
             f"faces, first at step 1); model_nodes=162") in r.message
+
+
+def test_a_source_of_a_few_vertices_is_not_said_to_reach_a_fine_target():
+    """A box of 8 vertices onto a sphere of 642: its 8 pairs reach their partners, but
+    most of the sphere lies far from the box's faces (mean 0.39 of the radius). The stop
+    test measured the pairs alone below 13 vertices and said converged; now the target's
+    points to the source's faces count, and the message says nothing of node counts it
+    did not measure (it said 'the source has 0 nodes for the target's 0')."""
+    trimesh = pytest.importorskip("trimesh")
+    box = trimesh.creation.box((1.0, 2.0, 0.5))
+    b, fb = icosphere(3)
+    r = mm.morph(mm.Shape(box.vertices, faces=box.faces), mm.Shape(b, faces=fb))
+    assert not r.converged, r.message
+    assert r.distance > 20 * r.tolerance  # 0.39 against 0.005 measured
+    assert "0 nodes" not in r.message

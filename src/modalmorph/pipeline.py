@@ -247,7 +247,7 @@ def _coarse_source(stop, run, target: Shape, folded: bool) -> str:
     target's count, 6 of 8 converge)."""
     floor, m, n, partners = stop.resolution
     coarse = 2 * m < n and floor > COARSE_SOURCE * stop.tolerance
-    if not (coarse or (m <= SHORT_SOURCE * n and (folded or not run.converged))):
+    if not m or not (coarse or (m <= SHORT_SOURCE * n and (folded or not run.converged))):
         return ""
     src, tgt = ("the source", "the target's") if partners is None else \
         (f"source contour {partners[0]}", f"target contour {partners[1]}'s")

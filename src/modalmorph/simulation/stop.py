@@ -125,7 +125,7 @@ class StopTest:
 
 
 class PairStop(StopTest):
-    """2D point sets, and 3D ones of at most ``PLANE`` points: the mean distance of the
+    """2D point sets, and 3D targets of at most ``PLANE`` points: the mean distance of the
     nodes pulled to partners."""
 
     def distance(self, current: np.ndarray, near: float, lazy: bool = True) -> float:
@@ -238,13 +238,17 @@ class SurfaceStop(StopTest):
         spacing = self.tree.query(target, k=2)[0][:, 1].mean()
         self.gate = limits.tolerance + LAZY_SPACINGS * spacing
         self.coarse = self.cover = 0.0
-        if m is not None and PLANE < m < len(target):  # a source coarser than the target
+        if m is not None and m < len(target):  # a source coarser than the target
             sample = target[even_subset(target, m)]
             tree = cKDTree(sample)
             self.cover = float(tree.query(target)[0].max())
-            left = float(to_surface(target, sample, tree).mean())
-            self.coarse = max(left - self.floor, 0.0)
-        self.source_faces = source_faces if m is not None and m >= len(target) else None
+            if m > PLANE:  # enough nodes for their quadrics
+                left = float(to_surface(target, sample, tree).mean())
+                self.coarse = max(left - self.floor, 0.0)
+        # the source's own triangles where it is as fine as the target, or has too few
+        # vertices for quadrics (a box of 8 onto a sphere: its faces are the shape)
+        self.source_faces = source_faces if m is not None and (
+            m >= len(target) or m <= PLANE) else None
         self.band = faces is not None and m is not None and m > len(target)
         quadrics = faces is None or self.source_faces is None  # whose floor hides
         self.pairs = quadrics and self.floor > COARSE_FLOOR * limits.tolerance
@@ -263,7 +267,7 @@ class SurfaceStop(StopTest):
         if self.source_faces is None:
             tree = cKDTree(current)
             d_ba = max(float(to_surface(Y, current, tree).mean()) - self.coarse,
-                       self.floor) - self.floor
+                       self.floor) - self.floor if len(current) > PLANE else 0.0
             if self.cover:
                 gap, node = tree.query(Y)
                 reach = np.maximum(tree.query(current, k=COVER_NEIGHBOUR + 1)[0][:, -1],
@@ -285,7 +289,7 @@ def choose_stop_test(source: Shape, target: Shape, target_n: np.ndarray,
     if source.ordered and target.ordered:
         return CurveStop(limits, target_n, closed=source.closed,
                          target_closed=target.closed, m=source.m)
-    if source.dim == 3 and min(source.m, target.m) > PLANE and (
+    if source.dim == 3 and target.m > PLANE and (
             target.faces is not None or curve_dimension(target_n) >= CURVE_DIMENSION):
         return SurfaceStop(limits, target_n, m=source.m, faces=target.faces,
                            source_faces=source.faces)
