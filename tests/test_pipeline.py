@@ -481,5 +481,27 @@ def test_a_source_short_of_a_finer_target_is_told_to_resample():
     a, b = outline("DejaVu Sans"), outline("DejaVu Serif")
     r = morph(a, b)
     assert not r.converged and len(a) < len(b)
-    assert f"the source has {len(a)} nodes for the target's {len(b)}: resampled" in r.message
+    assert f"the source has {len(a)} nodes for the target's {len(b)}: " in r.message
+    assert "resample" in r.message  # with the stop test's allowance: the coarse clause
     assert morph(resample(a, len(b)), b).converged
+
+
+def test_a_coarse_source_converged_within_the_allowance_is_told():
+    """cmr10's 'I' of 28 vertices onto its 'T' of 55, each resampled at its own count:
+    converged within the stop test's allowance for a coarser source (6 tolerances: the
+    serifs cut), and the message says so; at the target's count nothing is said."""
+    from matplotlib.font_manager import FontProperties, findfont
+    from matplotlib.textpath import TextPath
+
+    from modalmorph.core.shape import resample
+
+    def outline(ch):
+        prop = FontProperties(fname=findfont(FontProperties(family="cmr10")))
+        p = max(TextPath((0, 0), ch, size=100, prop=prop).to_polygons(), key=len)[:-1]
+        return resample(p, len(p))
+
+    a, b = outline("I"), outline("T")
+    r = morph(a, b)
+    assert r.converged and len(a) <= 0.8 * len(b)
+    assert f"the source has {len(a)} nodes for the target's {len(b)}: drawn" in r.message
+    assert "resample" not in morph(resample(a, len(b)), b).message
