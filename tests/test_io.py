@@ -231,6 +231,8 @@ def test_svg_several_subpaths_are_contours(tmp_path):
     mixed = _svg(tmp_path, '<path d="M0 0 H10 V10 Z M20 20 H30 V30"/>', "mixed.svg")
     with pytest.raises(ValueError, match="mixes closed and open contours"):
         read_shape(mixed)
+    stray = _svg(tmp_path, '<path d="M10,10 L90,10 L90,90 Z M 20 20 L 20 20"/>', "stray.svg")
+    assert read_shape(stray).sizes == (200,)  # a subpath of no length draws nothing
 
 
 def test_svg_circle_ellipse_rect_and_viewbox(tmp_path):

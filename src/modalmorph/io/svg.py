@@ -80,7 +80,8 @@ def read_svg(path: Path, name: str, options: ReadOptions) -> RawShape:
         if svg.viewbox is not None:  # back from the viewport to the file's user units
             element = element * ~se.Matrix(svg.viewbox_transform)
         drawn = [list(sub) for sub in abs(se.Path(element)).as_subpaths()]  # transformed
-        drawn = [segs for segs in drawn if len(segs) > 1]
+        drawn = [segs for segs in drawn  # a lone move, or a subpath of no length: not drawn
+                 if len(segs) > 1 and sum(seg.length() for seg in segs) > 0]
         if not drawn:
             raise InputFileError(f"{name}: the <{tag}> read has no segments")
         loops += [_sampled(se, segments) for segments in drawn]
