@@ -640,6 +640,11 @@ def test_mesh_files_meshio_refuses(tmp_path):
     (tmp_path / "textured.obj").write_text("\n".join(lines) + "\n")
     _same_surface(read_shape(tmp_path / "textured.obj"), points, faces, atol=1e-6)
 
+    relative = [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in points] + [  # OBJ's negative
+        "f " + " ".join(str(i - len(points)) for i in f) for f in faces]  # indices
+    (tmp_path / "relative.obj").write_text("\n".join(relative) + "\n")
+    _same_surface(read_shape(tmp_path / "relative.obj"), points, faces, atol=1e-6)
+
     # an ASCII STL with a blank line before ``endsolid``, as trimesh writes it
     facets = ["facet normal 0 0 1\nouter loop\n" + "".join(
         f"vertex {x:.9g} {y:.9g} {z:.9g}\n" for x, y, z in points[f]) + "endloop\nendfacet"

@@ -492,3 +492,21 @@ def test_cli_morph_and_track_on_svg_o(tmp_path):
     assert len(read_shape(tmp_path / "morph" / "final_shape.csv").sizes) == 2
     with np.load(tmp_path / "track" / "track.npz") as data:
         assert len(data["contours"]) == 2 and data["points"].shape[1] == 80
+
+
+def test_resample_takes_a_shape_of_several_contours():
+    """``modalmorph.resample`` on a Shape: every contour resampled, the count shared by
+    length (more nodes than a contour had as well as fewer), frame and closure kept; a
+    point set is refused (it raised a TypeError)."""
+    import modalmorph as mm
+
+    t = 2 * np.pi * np.arange(50) / 50
+    c = np.c_[np.cos(t), np.sin(t)]
+    ring_shape = mm.Shape(np.r_[2 * c, c[::-1]], contours=(50, 50))
+    for n in (30, 300):
+        r = mm.resample(ring_shape, n)
+        assert r.m == n and abs(r.sizes[0] - 2 * r.sizes[1]) <= 3  # outer twice as long
+        assert_allclose(np.linalg.norm(r.contour(1).points, axis=1), 1.0, atol=0.02)
+    assert mm.resample(mm.Shape(c), 80).m == 80
+    with pytest.raises(ValueError, match="ordered contours"):
+        mm.resample(mm.Shape(c, ordered=False), 20)

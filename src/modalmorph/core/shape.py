@@ -16,8 +16,8 @@ from ..errors import ShapeError
 
 __all__ = ["CURVE_DIMENSION", "CURVE_JUMP", "CURVE_STEP", "FPS_POOL", "FPS_TREE", "GRID_ROUNDS",
            "HUGE", "ImageFrame", "PASSED_KEPT", "Shape", "as_shape", "check_once", "check_pairs",
-           "coarsen", "curve_dimension", "even_subset", "forget_checks", "resample", "share",
-           "spread_indices", "traces_curve"]
+           "coarsen", "curve_dimension", "even_subset", "forget_checks", "resample",
+           "resampled_counts", "share", "spread_indices", "traces_curve"]
 
 # Two nodes closer than this fraction of the object's RMS radius are "the same node".
 _REPEAT_TOL = 1e-9
@@ -372,23 +372,33 @@ def as_shape(obj, name: str = "shape") -> Shape:
                          f"{name}: {msg}") from None
 
 
-def resample(points, n: int, *, closed: bool = True) -> np.ndarray:
+def resample(points, n: int, *, closed: bool = True):
     """Resample a polyline to ``n`` nodes equally spaced by arc length.
 
     Parameters
     ----------
-    points : array_like, shape (m, d)
-        Ordered nodes.
+    points : array_like, shape (m, d), or Shape
+        Ordered nodes; or an ordered :class:`Shape`, whose contours are resampled each,
+        ``n`` nodes shared among them by length (:func:`resampled_counts`).
     n : int
         Number of nodes wanted, >= 3.
     closed : bool, optional
         Whether the polyline closes on itself (then the first node is kept and the last
-        segment is included).
+        segment is included); a Shape's own is used.
 
     Returns
     -------
-    ndarray, shape (n, d)
+    ndarray, shape (n, d), or Shape
     """
+    if isinstance(points, Shape):
+        if not points.ordered:
+            raise ShapeError("resample takes ordered contours; coarsen() spreads a subset "
+                             "of a point set")
+        counts = resampled_counts(points, n)
+        parts = [resample(points.points[r], c, closed=points.closed)
+                 for r, c in zip(points.slices, counts, strict=True)]
+        return Shape(np.vstack(parts), closed=points.closed, frame=points.frame,
+                     contours=tuple(counts) if len(counts) > 1 else None)
     pts = np.asarray(points, dtype=np.float64)
     if n < 3:
         raise ShapeError(f"n must be >= 3, got {n}")
@@ -494,6 +504,16 @@ def coarsen(shape: Shape, n: int) -> Shape:
         return Shape(np.vstack(pts), closed=shape.closed,
                      contours=tuple(counts) if shape.contours else None)
     return Shape(shape.points[spread_indices(shape, n)], ordered=False)
+
+
+def resampled_counts(shape: Shape, n: int) -> list[int]:
+    """``n`` nodes shared among the contours of an ordered shape by length, as
+    :func:`share` does, but each contour may get more nodes than it has (resampled)."""
+    if len(shape.sizes) == 1:
+        return [n]
+    dense = [resample(shape.points[r], n, closed=shape.closed) for r in shape.slices]
+    return share(Shape(np.vstack(dense), closed=shape.closed,
+                       contours=(n,) * len(dense)), n)
 
 
 def share(shape: Shape, n: int) -> list[int]:

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.quality import check_flat, crossed_contours
-from ..core.shape import ImageFrame, Shape, resample, share
+from ..core.shape import ImageFrame, Shape, resample, resampled_counts
 from ..errors import InputFileError, ShapeError
 from ..options import ReadOptions
 
@@ -179,13 +179,11 @@ def _resampled(name: str, pts, nodes: int, closed: bool, contours
 
 
 def _shared(whole: Shape, keep: list, nodes: int) -> list[int]:
-    """``nodes`` shared by length among the contours ``keep`` of ``whole``, each at most
-    its count resampled densely."""
-    if len(keep) == 1:
-        return [nodes]
-    dense = [resample(whole.points[whole.slices[k]], nodes, closed=whole.closed) for k in keep]
-    return share(Shape(np.vstack(dense), closed=whole.closed,
-                       contours=(nodes,) * len(dense)), nodes)
+    """``nodes`` shared by length among the contours ``keep`` of ``whole``."""
+    parts = [whole.points[whole.slices[k]] for k in keep]
+    return resampled_counts(Shape(np.vstack(parts), closed=whole.closed,
+                                  contours=tuple(map(len, parts)) if len(parts) > 1 else None),
+                            nodes)
 
 
 def _listed(numbers) -> str:

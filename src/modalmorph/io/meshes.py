@@ -41,6 +41,9 @@ def read_mesh(path: Path, name: str, options: ReadOptions) -> RawShape:
     try:
         mesh = _meshio_read(meshio, path, name)
         points, triangles = np.asarray(mesh.points, dtype=np.float64), _triangles(mesh)
+        if any(t.size and t.min() < 0 for t in triangles):  # OBJ's relative (negative)
+            raise InputFileError(f"{name}: triangles refer to points outside "  # indices,
+                                 f"0..{len(points) - 1}")  # which meshio reads as absolute
     except InputFileError as refused:
         if path.suffix.lower() not in GRAPHICS_FORMATS:
             raise

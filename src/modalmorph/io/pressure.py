@@ -92,8 +92,10 @@ def pressure_level(pressure: np.ndarray, *, threshold: float | None, fraction: f
     and for a threshold at or above every value (naming the peak's frame)."""
     peak = float(pressure.max())
     if peak <= 0:
-        raise InputFileError(f"{name}: every value of the {len(pressure)} frame(s) is "
-                             f"{peak:g}: nothing is loaded")
+        low = float(pressure.min())
+        values = f"is {peak + 0.0:g}" if low == peak else f"lies in {low:g} .. {peak + 0.0:g}"
+        raise InputFileError(f"{name}: every value of the {len(pressure)} frame(s) {values}: "
+                             "nothing is loaded (pressure is positive where loaded)")
     level = fraction * peak if threshold is None else float(threshold)
     if level >= peak:
         f = int(np.argmax(pressure.max(axis=(1, 2))))
