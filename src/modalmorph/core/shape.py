@@ -394,7 +394,7 @@ def resample(points, n: int, *, closed: bool = True):
         if not points.ordered:
             raise ShapeError("resample takes ordered contours; coarsen() spreads a subset "
                              "of a point set")
-        counts = resampled_counts(points, n)
+        counts = resampled_counts([points.points[r] for r in points.slices], n, points.closed)
         parts = [resample(points.points[r], c, closed=points.closed)
                  for r, c in zip(points.slices, counts, strict=True)]
         return Shape(np.vstack(parts), closed=points.closed, frame=points.frame,
@@ -506,14 +506,13 @@ def coarsen(shape: Shape, n: int) -> Shape:
     return Shape(shape.points[spread_indices(shape, n)], ordered=False)
 
 
-def resampled_counts(shape: Shape, n: int) -> list[int]:
-    """``n`` nodes shared among the contours of an ordered shape by length, as
-    :func:`share` does, but each contour may get more nodes than it has (resampled)."""
-    if len(shape.sizes) == 1:
+def resampled_counts(contours: list, n: int, closed: bool = True) -> list[int]:
+    """``n`` nodes shared among contours (a list of (m_k, d) arrays) by length, as
+    :func:`share` does, but each may get more nodes than it has (resampled)."""
+    if len(contours) == 1:
         return [n]
-    dense = [resample(shape.points[r], n, closed=shape.closed) for r in shape.slices]
-    return share(Shape(np.vstack(dense), closed=shape.closed,
-                       contours=(n,) * len(dense)), n)
+    dense = [resample(c, n, closed=closed) for c in contours]
+    return share(Shape(np.vstack(dense), closed=closed, contours=(n,) * len(dense)), n)
 
 
 def share(shape: Shape, n: int) -> list[int]:

@@ -152,18 +152,17 @@ def _resampled(name: str, pts, nodes: int, closed: bool, contours
     a detail finer than the node spacing (logged): a contour that then crosses itself
     (a thin hole of 10 nodes) gets twice its nodes, up to its own count; of two that
     cross (a hole a pixel inside the outline), the shorter is dropped."""
-    whole = Shape(pts, closed=closed, contours=contours)
-    keep, grown, dropped = list(range(len(whole.sizes))), {}, []
+    raw = np.split(pts, np.cumsum(contours or (len(pts),))[:-1])
+    keep, grown, dropped = list(range(len(raw))), {}, []
     while True:
-        counts = _shared(whole, keep, nodes)
+        counts = resampled_counts([raw[k] for k in keep], nodes, closed)
         counts = [max(c, grown.get(k, 0)) for k, c in zip(keep, counts, strict=True)]
-        parts = [resample(pts[whole.slices[k]], c, closed=closed)
-                 for k, c in zip(keep, counts, strict=True)]
+        parts = [resample(raw[k], c, closed=closed) for k, c in zip(keep, counts, strict=True)]
         own, both = crossed_contours(Shape(np.vstack(parts), closed=closed,
                                            contours=tuple(counts)))
-        own = [i for i in own if counts[i] < whole.sizes[keep[i]]]
+        own = [i for i in own if counts[i] < len(raw[keep[i]])]
         for i in own:
-            grown[keep[i]] = min(2 * counts[i], whole.sizes[keep[i]])
+            grown[keep[i]] = min(2 * counts[i], len(raw[keep[i]]))
         worse = {min(pair, key=lambda i: counts[i]) for pair in both} if not own else ()
         if not own and not worse:
             break
@@ -176,14 +175,6 @@ def _resampled(name: str, pts, nodes: int, closed: bool, contours
                   f"{sum(counts)} in all" if grown else "", "; " if grown and dropped else "",
                   f"contour(s) {_listed(dropped)} crossed another: dropped" if dropped else "")
     return np.vstack(parts), (tuple(counts) if len(counts) > 1 else None)
-
-
-def _shared(whole: Shape, keep: list, nodes: int) -> list[int]:
-    """``nodes`` shared by length among the contours ``keep`` of ``whole``."""
-    parts = [whole.points[whole.slices[k]] for k in keep]
-    return resampled_counts(Shape(np.vstack(parts), closed=whole.closed,
-                                  contours=tuple(map(len, parts)) if len(parts) > 1 else None),
-                            nodes)
 
 
 def _listed(numbers) -> str:
