@@ -75,6 +75,25 @@ def test_uneven_polygons_are_resampled_by_arc_length(tmp_path, caplog):
     assert read_shape(_write_csv(tmp_path / "c.csv", circle)).m == 40  # even: kept
 
 
+def test_image_coordinates_written_to_csv_read_back_as_image_coordinates(tmp_path):
+    """A morph's final shape from an SVG (y down) written to CSV says so on its first
+    line and reads back y down, in the same unit: beside the SVG again it is not taken
+    for a mirror image (the warning advised flip_y, which mirrored it)."""
+    import modalmorph as mm
+    from modalmorph.io.results import save_result
+
+    svg = _write_svg(tmp_path / "p.svg", _glyph_p())
+    shape = read_shape(svg)
+    save_result(mm.morph(shape, shape), tmp_path / "out")
+    written = tmp_path / "out" / "final_shape.csv"
+    assert written.read_text().startswith("# y down (image coordinates), unit ")
+    back = read_shape(written)
+    assert y_down(back) and back.frame.unit == shape.frame.unit
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_pair(written, svg, ReadOptions())
+
+
 def test_mixed_y_directions_warn_once_and_flip_y_mirrors(tmp_path):
     csv = _write_csv(tmp_path / "p.csv", _glyph_p())
     svg = _write_svg(tmp_path / "p.svg", _glyph_p())

@@ -5,7 +5,9 @@
   column names; if it names columns ``x`` and ``y`` (and ``z``), those columns are used
   and others ignored, but a ``contour`` column: the contour of each node (a shape of
   several contours, a ring's outer boundary and hole; each contour's rows consecutive).
-  Blank lines and lines starting with ``#`` are skipped.
+  Blank lines and lines starting with ``#`` are skipped, but a first line ``# y down
+  (image coordinates), unit U``: the numbers are image coordinates, y pointing down, in
+  unit U (as :func:`write_points` writes a shape from an image or SVG).
 - ``.xyz``: the same text, ``x y z`` first on each line, then any attributes (colours,
   normals), left out.
 - ``.npy``: an (m, 2) or (m, 3) array; ``.npz``: the array ``points`` (or the only array
@@ -26,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.shape import Shape
+from ..core.shape import ImageFrame, Shape
 from ..errors import InputFileError, ShapeError
 from ..options import ReadOptions
 from .atomic import atomic_write
@@ -35,6 +37,8 @@ from .base import RawShape
 __all__ = ["TEXT_SEPARATORS", "WRITABLE", "contour_runs", "load_npy", "npz_arrays", "parse_float",
            "read_json", "read_npy", "read_npz", "read_text", "read_xyz", "write_points"]
 
+# The first line of a text file of image coordinates (y down), then ", unit U".
+Y_DOWN = "# y down (image coordinates)"
 # The text formats written, with their column separator (any is read).
 TEXT_SEPARATORS = {".csv": ",", ".tsv": "\t", ".txt": " "}
 WRITABLE = (*TEXT_SEPARATORS, ".npy", ".npz", ".json")
@@ -59,6 +63,7 @@ def read_text(path: Path, name: str, options: ReadOptions, xyz: bool = False) ->
         raise InputFileError(f"{name}: not a text file (cannot decode it as UTF-8: "
                              f"{exc.reason} at byte {exc.start})") from None
     lines = [(i, line.strip()) for i, line in enumerate(text.splitlines(), start=1)]
+    frame = _frame(lines[0][1] if lines else "")
     lines = [(i, line) for i, line in lines if line and not line.startswith("#")]
     if not lines:
         raise InputFileError(f"{name}: the file has no data")
@@ -108,8 +113,16 @@ def read_text(path: Path, name: str, options: ReadOptions, xyz: bool = False) ->
         rows.append(row)
     table = np.array(rows, dtype=np.float64)
     if columns is not None and "contour" in names:
-        return RawShape(table[:, :-1], contours=contour_runs(name, table[:, -1]))
-    return RawShape(table)
+        return RawShape(table[:, :-1], contours=contour_runs(name, table[:, -1]), frame=frame)
+    return RawShape(table, frame=frame)
+
+
+def _frame(first: str) -> ImageFrame | None:
+    """The frame a text file's first line declares (:data:`Y_DOWN`), else None."""
+    if not first.startswith(Y_DOWN):
+        return None
+    unit = first[len(Y_DOWN):].partition(", unit ")[2].strip()
+    return ImageFrame(unit=unit or "px")
 
 
 def _named_columns(name: str, names: list, line: int) -> list | None:
@@ -289,7 +302,7 @@ def read_json(path: Path, name: str, options: ReadOptions) -> RawShape:
                     contours=contours)
 
 
-def write_points(path, points, *, contours=None) -> None:
+def write_points(path, points, *, contours=None, frame=None) -> None:
     """Write nodes to a file, the format chosen by its extension, atomically.
 
     Parameters
@@ -305,6 +318,9 @@ def write_points(path, points, *, contours=None) -> None:
     contours : sequence of int, optional
         For an array: the node counts of its contours, written as a :class:`Shape`'s
         (a ``contour`` column, ``"contours"``); a Shape has its own.
+    frame : ImageFrame, optional
+        For an array: its frame; a Shape has its own. Image coordinates (y down) are
+        said on the first line of a text file (:data:`Y_DOWN`), and read back so.
 
     Raises
     ------
@@ -332,7 +348,9 @@ def write_points(path, points, *, contours=None) -> None:
                    if contours else [[]] * len(pts))
             body = "".join(sep.join([*(repr(float(v)) for v in row), *c]) + "\n"
                            for row, c in zip(pts, ids, strict=True))
-            tmp.write_text(sep.join(names) + "\n" + body, encoding="utf-8")
+            frame = shape.frame if shape is not None else frame
+            said = f"{Y_DOWN}, unit {frame.unit}\n" if frame is not None and frame.y_down else ""
+            tmp.write_text(said + sep.join(names) + "\n" + body, encoding="utf-8")
         elif ext == ".npy":
             np.save(tmp, pts)
         elif ext == ".npz":

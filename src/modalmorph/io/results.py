@@ -65,7 +65,8 @@ def save_result(morph, out_dir, *, options: dict | None = None,
             mean_distance=np.asarray(morph.mean_distance, dtype=np.float64),
             pairs=_pairs_array(morph), **_contours(morph.source))
     write_points(out_dir / "final_shape.csv", shapes[-1],
-                 contours=getattr(morph.source, "contours", None))
+                 contours=getattr(morph.source, "contours", None),
+                 frame=getattr(morph.source, "frame", None))
 
 
 def _contours(source) -> dict:
