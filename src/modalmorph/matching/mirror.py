@@ -12,26 +12,27 @@ from scipy.spatial.distance import cdist
 from ..core.align import Similarity
 from ..core.shape import Shape
 
-__all__ = ["MIRROR", "MIRROR_EXACT", "MIRROR_SUSPECT", "mirror_ratio", "mirror_said"]
+__all__ = ["MIRROR", "MIRROR_EXACT", "MIRROR_SUSPECT", "mirror_called", "mirror_gap",
+           "mirror_ratio", "mirror_said"]
 
 log = logging.getLogger(__name__)
 
 # A 2D contour's target looks like its mirror image (a 'b', a 'd') where the source placed
 # by the pairs' similarity lies farther than MIRROR_SUSPECT of the target's RMS radius from
-# it (matching._gap, every node both ways), and the source reflected, matched again in any
+# it (mirror_gap, every node both ways), and the source reflected, matched again in any
 # pose, lies MIRROR times nearer. Measured on 186 pairs as given (the shared hearts ED <->
 # ES, hands, DejaVu Sans -> Serif glyphs at 100 and 200 nodes, the horse, scaled hearts):
 # the gap at most 0.137 (4 pairs over 0.12 pay the second match), the ratio at most 2.01
 # (near-symmetric hearts), none said; onto their mirror images turned 34 deg: 37 said (the
 # horse 4 of 4, 29 of 124 glyphs: b d F L ..., 4 hands), near-symmetric outlines not
 # (hearts, A H O o: their mirror image turned fits nearly as well).
-MIRROR_SUSPECT = 0.12
-MIRROR = 3.0
+MIRROR_SUSPECT = 0.10
+MIRROR = 1.4
 _BRUTE = 250_000  # node pairs measured all at once by _gap (a 250 x 1000 pair: 2 MB)
 MIRROR_EXACT = 1e-9  # gaps below this x the other's: an exact mirror image (ratio capped)
 
 
-def _gap(x: np.ndarray, y: np.ndarray, sim: Similarity) -> float:
+def mirror_gap(x: np.ndarray, y: np.ndarray, sim: Similarity) -> float:
     """How far the whole source ``x`` placed by ``sim`` lies from the target ``y``: the
     RMS of both ways' nearest-node distances over the target's RMS radius (every node,
     not the pairs alone: onto a mirror image the matcher keeps the few that fit); all
@@ -49,20 +50,34 @@ def _gap(x: np.ndarray, y: np.ndarray, sim: Similarity) -> float:
 
 def mirror_ratio(again, src: Shape, tgt: Shape, sim: Similarity) -> float | None:
     """:attr:`Matching.mirror`: where the source placed by the pairs' similarity lies
-    farther than ``MIRROR_SUSPECT`` from the target (:func:`_gap`), the source reflected
-    (x -> -x; any reflection is this one turned) is matched again in any pose
-    (``again()``: its similarity onto the target, ``rotation="free"``), and the ratio of
-    the two gaps returned where it exceeds ``MIRROR`` (at most ``1 / MIRROR_EXACT``: an
-    exact mirror image); else None."""
-    g0 = _gap(src.points, tgt.points, sim)
+    farther than ``MIRROR_SUSPECT`` from the target (:func:`mirror_gap`: ``g0``), the source
+    reflected (x -> -x; any reflection is this one turned) is matched again in any pose
+    (``again(True)``: its similarity onto the target, ``rotation="free"``: ``g1``); where
+    :func:`mirror_called` says so, the source as given is matched again in any pose too
+    (``again(False)``; None where the first match's rotation was already free), ``g0`` is
+    the nearer of its two poses', and the ratio ``g0 / g1`` is returned where
+    :func:`mirror_called` still says so (at most ``1 / MIRROR_EXACT``: an exact mirror
+    image); else None."""
+    g0 = mirror_gap(src.points, tgt.points, sim)
     if not g0 > MIRROR_SUSPECT:
         return None
-    g1 = _gap(src.points * [-1.0, 1.0], tgt.points, again())
-    if not g0 > MIRROR * g1:
+    g1 = mirror_gap(src.points * [-1.0, 1.0], tgt.points, again(True))
+    if not mirror_called(g0, g1):
         return None
+    free = again(False)  # the first pose may be a wrong turn that the free search avoids
+    if free is not None:
+        g0 = min(g0, mirror_gap(src.points, tgt.points, free))
+        if not mirror_called(g0, g1):
+            return None
     ratio = float(g0 / max(g1, MIRROR_EXACT * g0))
     log.debug("%s", mirror_said(ratio))
     return ratio
+
+
+def mirror_called(g0: float, g1: float) -> bool:
+    """Whether the gaps of the source as placed (``g0``) and reflected (``g1``) say that
+    the target is a mirror image (:func:`mirror_gap`)."""
+    return bool(g0 > MIRROR * g1)
 
 
 def mirror_said(mirror: float) -> str:
