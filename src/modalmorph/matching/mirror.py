@@ -66,21 +66,19 @@ def mirror_ratio(again, src: Shape, tgt: Shape, sim: Similarity) -> float | None
     reflected (x -> -x; any reflection is this one turned) is matched again in any pose
     (``again(True)``: its similarity onto the target, ``rotation="free"``: ``g1``); where
     :func:`mirror_called` says so, the source as given is matched again in any pose too
-    (``again(False)``; None where the first match's rotation was already free), ``g0`` is
-    the nearer of its two poses', and the ratio ``g0 / g1`` is returned where
-    :func:`mirror_called` still says so (at most ``1 / MIRROR_EXACT``: an exact mirror
-    image); else None."""
+    (``again(False)``), ``g0`` is the nearer of its two poses', and the ratio ``g0 / g1`` is
+    returned where :func:`mirror_called` still says so (at most ``1 / MIRROR_EXACT``: an
+    exact mirror image); else None."""
     g0 = mirror_gap(src.points, tgt.points, sim)
     if not g0 > MIRROR_SUSPECT:
         return None
     g1 = mirror_gap(src.points * [-1.0, 1.0], tgt.points, again(True))
     if not mirror_called(g0, g1):
         return None
-    free = again(False)  # the first pose may be a wrong turn that the free search avoids
-    if free is not None:
-        g0 = min(g0, mirror_gap(src.points, tgt.points, free))
-        if not mirror_called(g0, g1):
-            return None
+    # the first pose may be a wrong turn that the free search avoids
+    g0 = min(g0, mirror_gap(src.points, tgt.points, again(False)))
+    if not mirror_called(g0, g1):
+        return None
     ratio = float(g0 / max(g1, MIRROR_EXACT * g0))
     log.debug("%s", mirror_said(ratio))
     return ratio
