@@ -302,11 +302,11 @@ def _match_one(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
     if src.dim != 2 or not src.ordered or opts.rotation == "none":
         return pairs, cost, sim, None
 
-    def again() -> Similarity:  # the source reflected, matched in any pose
-        free = opts.replace(rotation="free")
+    def again(reflect: bool) -> Similarity:  # the source, reflected or not, in any pose
+        free, flip = opts.replace(rotation="free"), [-1.0 if reflect else 1.0, 1.0]
         if large:
-            return _match_large(src.with_points(src.points * [-1.0, 1.0]), tgt, n_modes, free)[2]
-        q = reflected(p, "free")
+            return _match_large(src.with_points(src.points * flip), tgt, n_modes, free)[2]
+        q = reflected(p, "free") if reflect else replace(p, rotation="free")
         return _match_auto(q.src, tgt, n_modes, free, q)[2]
     return pairs, cost, sim, mirror_ratio(again, src, tgt, sim)
 
