@@ -63,12 +63,13 @@ def contour_slide(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     0, fraction of the outline (positive: forward in the node order), and the share of
     the misfit that shift leaves, ``d_k / d_0`` (1 where the frame fits frame 0 to
     rounding). Each frame and frame 0 are resampled at :data:`SLIDE_SAMPLES` points by
-    arc length from node 0, centred and scaled to unit norm (complex ``z``); the fit of shift ``k`` with its best turn is
-    ``|c_k|``, ``c_k = sum conj(z0[i]) z[i + k]`` (every ``k`` by one FFT), its misfit
-    ``d_k = 1 - |c_k|^2``. :func:`outline_slides` says a slide when the best shift
-    exceeds :data:`SLIDE_FRACTION` of the outline and ``d_k <= SLIDE_GAIN d_0``: the
-    shift, not a change of shape, explains why the nodes as they stand misfit frame 0's
-    (the turn is free: nodes that follow an object that turns show no shift)."""
+    arc length from node 0, centred and scaled to unit norm (complex ``z``); the fit of
+    shift ``k`` with its best turn is ``|c_k|``, ``c_k = sum conj(z0[i]) z[i + k]``
+    (every ``k`` by one FFT), its misfit ``d_k = 1 - |c_k|^2``. :func:`outline_slides`
+    says a slide when the best shift exceeds :data:`SLIDE_FRACTION` of the outline and
+    ``d_k <= SLIDE_GAIN d_0``: the shift, not a change of shape, explains why the nodes
+    as they stand misfit frame 0's (the turn is free: nodes that follow an object that
+    turns show no shift)."""
     z = np.array([_unit_profile(p) for p in points])
     spectra = np.fft.fft(z, axis=1)
     fit = np.abs(np.fft.ifft(spectra[:1].conj() * spectra, axis=1))  # (F, samples)
