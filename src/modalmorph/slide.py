@@ -14,7 +14,8 @@ import numpy as np
 
 from .core.shape import Shape, resample
 
-__all__ = ["SLIDE_FRACTION", "SLIDE_GAIN", "SLIDE_SAMPLES", "contour_slide", "outline_slides"]
+__all__ = ["SLIDE_FRACTION", "SLIDE_GAIN", "SLIDE_SAMPLES", "SLIDE_SPACINGS", "contour_slide",
+           "outline_slides"]
 
 # Slide of tracked nodes along a closed 2D contour (Track.slide, contour_slide): frame 0 and
 # each tracked frame, resampled at SLIDE_SAMPLES points by arc length from node 0, are
@@ -38,6 +39,12 @@ SLIDE_SAMPLES = 256
 # (2 spacings at 160 nodes; median node error 0.75 spacing) - not said.
 SLIDE_FRACTION = 0.015
 SLIDE_GAIN = 0.02
+# ... and SLIDE_SPACINGS of the contour's mean node spacing: at 70 nodes the modal
+# correspondence left unturned and turned glyphs 1.2-1.8 spacings (1.7-2.6 %) with a
+# median node error of 0.2-0.8 spacing, within what a track follows; its slides of 2.5
+# spacings and more (an LV turned 2-15 degrees a frame, 'G' turned 180) came with
+# median node errors of 3-55 spacings (benchmarks/track_slide.py --correspondence modal).
+SLIDE_SPACINGS = 2.0
 # Misfits below this are rounding (a sum of 256 unit terms: about 256 float64 epsilons,
 # 6e-14): every shift of a circle fits it as well, none is a slide.
 SAME = 1e-12
@@ -45,14 +52,17 @@ SAME = 1e-12
 
 def outline_slides(first: Shape, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``Track.slide`` and ``Track.slid``: per frame, the largest :func:`contour_slide` over
-    the contours of frame 0 (closed 2D contours only; else NaN and False)."""
+    the contours of frame 0, said beyond :data:`SLIDE_FRACTION` of the outline and
+    :data:`SLIDE_SPACINGS` node spacings (closed 2D contours only; else NaN and
+    False)."""
     n_frames = len(points)
     if first.dim != 2 or not first.closed or not first.ordered or first.faces is not None:
         return np.full(n_frames, np.nan), np.zeros(n_frames, dtype=bool)
     largest, slid = np.zeros(n_frames), np.zeros(n_frames, dtype=bool)
     for rows in first.slices:
         shift, gain = contour_slide(points[:, rows])
-        said = (np.abs(shift) > SLIDE_FRACTION) & (gain <= SLIDE_GAIN)
+        least = max(SLIDE_FRACTION, SLIDE_SPACINGS / len(points[0, rows]))
+        said = (np.abs(shift) > least) & (gain <= SLIDE_GAIN)
         larger = np.abs(shift) > np.abs(largest)
         largest[larger], slid = shift[larger], slid | said
     return largest, slid
