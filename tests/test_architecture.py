@@ -43,7 +43,8 @@ LAYERS = (
     ("core",),  # numbers: shape, material, element, modes, solvers, model, dynamics, ...
     ("options",),  # the one schema of every option
     ("simulation", "matching", "io", "figures"),  # time integration, matching, files, plots
-    ("pipeline", "datasets", "phantoms"),  # morph(); the bundled data; strain phantoms
+    ("pipeline", "datasets", "phantoms", "slide"),  # morph(); bundled data; phantoms;
+    # tracked nodes' slide along an outline
     ("tracking",),  # track(): sequences, frame by frame through morph()
     ("cardiac", "pedobarography"),  # strain(), stance(), register_footprints()
     ("",),  # the package's __init__: the public API

@@ -38,10 +38,10 @@ from .options import (
 )
 from .pipeline import Morph, morph
 from .simulation import reuse_systems
+from .slide import outline_slides
 from .threads import limit
 
-__all__ = ["REFERENCES", "CORRESPONDENCES", "Track", "track",
-           "curve_distance"]
+__all__ = ["REFERENCES", "CORRESPONDENCES", "Track", "track", "curve_distance"]
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +53,6 @@ log = logging.getLogger(__name__)
 # morphs did not converge); wrong correspondences (nearest pairs on frames turned by
 # 90-180 degrees) 2-35.
 FIT_SPACINGS = 1.0
-
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -125,6 +124,13 @@ class Track:
     closure_error : float or None
         Mean distance of the nodes brought back by ``closure`` to their own positions in
         frame 0 (user units): how far the track drifted over the cycle.
+    slide : ndarray, shape (F,)
+        How far the tracked nodes lie shifted along the outline from frame 0's, fraction
+        of the outline (signed, + in the node order; the largest of several contours;
+        NaN where not measured: open contours, surfaces, point sets).
+    slid : ndarray of bool, shape (F,)
+        Frames whose nodes slid along the outline, an object turning or sliding farther
+        than the correspondence follows (:func:`modalmorph.slide.outline_slides`).
     params : dict
         The options used, for reports.
     """
@@ -146,6 +152,8 @@ class Track:
     crossed: np.ndarray
     closure: Morph | None
     closure_error: float | None
+    slide: np.ndarray
+    slid: np.ndarray
     params: dict = field(default_factory=dict)
 
     def __repr__(self) -> str:
@@ -182,7 +190,8 @@ def track(frames, *, options: TrackOptions | None = None,
     (``source_frame`` says which; a warning says when neither passes). ``"nearest"``
     pairs the objects centred and scaled to one size: it follows changes of size and
     position, not a turn by more than about a node spacing from the frame a morph starts
-    from; for objects that turn, use ``correspondence="modal"`` (benchmarks/track.py).
+    from (``Track.slid`` and a warning say when the nodes slid along the outline); for
+    objects that turn, use ``correspondence="modal"`` (benchmarks/track.py).
 
     Parameters
     ----------
@@ -236,7 +245,9 @@ def track(frames, *, options: TrackOptions | None = None,
                   start_node=int(opts.start_node),
                   match_options={} if match_opts is None else match_opts.record(),
                   morph=parameters(morphs[0]))
-    return _result(shapes, names, points, (morphs, sources), closure, params)
+    result = _result(shapes, names, points, (morphs, sources), closure, params)
+    _say_slid(result, opts.correspondence)
+    return result
 
 
 def _track_options(options, overrides: dict) -> TrackOptions:
@@ -399,7 +410,21 @@ def _result(shapes, names, points, runs, closure, params) -> Track:
                            for p, s in zip(points, shapes, strict=True)]),
         crossed=np.array([_crosses_itself(p, first, (first, s))
                           for p, s in zip(points, shapes, strict=True)]),
-        closure=closure, closure_error=closure_error, params=params)
+        closure=closure, closure_error=closure_error,
+        **dict(zip(("slide", "slid"), outline_slides(first, points), strict=True)), params=params)
+
+
+def _say_slid(result: Track, correspondence: str) -> None:
+    """A warning naming the frames whose nodes slid along the outline (``Track.slid``)."""
+    frames = np.flatnonzero(result.slid)
+    if len(frames):
+        worst = int(frames[np.argmax(np.abs(result.slide[frames]))])
+        warnings.warn(
+            f"the tracked nodes slid along the outline at {len(frames)} of "
+            f"{result.n_frames - 1} frames (most at frame {worst}, {result.names[worst]}: "
+            f"{abs(result.slide[worst]):.1%} of the outline; Track.slide): the object "
+            f"turns or slides farther than correspondence='{correspondence}' follows"
+            + ("; use correspondence='modal'" if correspondence != "modal" else ""), stacklevel=3)
 
 
 def _frame(obj, f: int, names: tuple) -> Shape:

@@ -407,10 +407,12 @@ def _run_track(args) -> int:
         unit = "input units" if frame is None else frame.unit
         closure = ("" if result.closure_error is None else
                    f"; closure error {result.closure_error:.3g} {unit}")
+        slid = (f"; the nodes slid along the outline at {int(result.slid.sum())} frames (see "
+                "the warning)" if result.slid.any() else "")
         print(f"{result.n_frames} frames of {result.points.shape[1]} nodes; largest distance "
               f"to a frame {float(result.distance.max()):.3g} {unit}; contour strain "
               f"{100 * result.strain.min():+.1f} % .. {100 * result.strain.max():+.1f} %"
-              f"{closure}", file=sys.stderr)
+              f"{closure}{slid}", file=sys.stderr)
         _list_files(run.files)
     return _converged_code(result.morphs)
 
