@@ -231,10 +231,12 @@ def test_cli_track(kind, tmp_path):
     with np.load(out / "track.npz") as data:
         assert data["points"].shape == (4, 60, 2)
         assert np.all(data["strain"][1:] < 0)  # squeezed horizontally: the outline shortens
+        assert data["slide"].shape == (4,) and not data["slid"].any()  # squeezed, not turned
     import json
 
     summary = json.loads((out / "track.json").read_text())
     assert len(summary["frames"]) == 4 and summary["nodes"] == 60
+    assert all(f["slid"] is False for f in summary["frames"])
     table = np.loadtxt(out / "strain_segments.csv", delimiter=",", skiprows=1)
     assert table.shape == (4, 8)
 

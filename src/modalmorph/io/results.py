@@ -179,7 +179,7 @@ def save_track(track, out_dir, *, options: dict | None = None,
         ``cumulative_energy``, ``strain``, ``distance`` (F,), ``node_energy`` (F, m),
         ``edges`` (e, 2),
         ``edge_strain`` (F, e), ``segment_strain`` (F, S), ``segment_of_edge`` (e,),
-        ``crossed`` (F,).
+        ``crossed``, ``slide``, ``slid`` (F,).
     ``track.json``
         ``modalmorph_version``, ``parameters``, ``inputs`` (frame names), ``nodes``,
         ``input_files`` (each file's ``path`` and ``sha256``, when given), ``options``
@@ -187,8 +187,8 @@ def save_track(track, out_dir, *, options: dict | None = None,
         ``dim``, ``closure_error`` (or null) and ``frames``: per frame ``name``,
         ``observed_nodes``, ``source_frame``, ``steps``, ``converged``, ``energy``,
         ``cumulative_energy``,
-        ``strain``, ``segment_strain``, ``distance``, ``crossed`` (frame 0: no morph,
-        ``steps`` 0).
+        ``strain``, ``segment_strain``, ``distance``, ``crossed``, ``slide`` (null where
+        not measured), ``slid`` (frame 0: no morph, ``steps`` 0).
     ``strain_segments.csv``
         One row per frame: ``frame,global,segment_1,...,segment_S``.
     """
@@ -205,7 +205,8 @@ def save_track(track, out_dir, *, options: dict | None = None,
             "cumulative_energy": float(track.cumulative_energy[f]),
             "strain": float(track.strain[f]),
             "segment_strain": _finite_or_none(track.segment_strain[f]),
-            "distance": float(track.distance[f]), "crossed": bool(track.crossed[f])})
+            "distance": float(track.distance[f]), "crossed": bool(track.crossed[f]),
+            "slide": _finite_or_none([track.slide[f]])[0], "slid": bool(track.slid[f])})
     summary = {"modalmorph_version": __version__, "parameters": track.params,
                "inputs": list(track.names), "input_files": list(input_files or []),
                "options": dict(options or {}), "nodes": int(track.points.shape[1]),
@@ -221,7 +222,8 @@ def save_track(track, out_dir, *, options: dict | None = None,
             cumulative_energy=track.cumulative_energy, strain=track.strain,
             distance=track.distance, edges=track.edges, edge_strain=track.edge_strain,
             segment_strain=track.segment_strain, segment_of_edge=track.segment_of_edge,
-            crossed=track.crossed, **_contours(track.frames[0]))
+            crossed=track.crossed, slide=track.slide, slid=track.slid,
+            **_contours(track.frames[0]))
     n_seg = track.segment_strain.shape[1]
     table = np.column_stack([np.arange(track.n_frames), track.strain, track.segment_strain])
     header = ",".join(["frame", "global", *[f"segment_{s + 1}" for s in range(n_seg)]])
