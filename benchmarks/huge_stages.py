@@ -131,10 +131,9 @@ def field_fit(xc, ctr, width, resid, w, ridge):
     return np.linalg.solve(a, kac.T @ (w[:, None] * resid))
 
 
-def joint_level(x, z, y, start, widths=(1.0, 0.3), rounds=200, ridge=1e-3, controls=300):
-    """Refine's first level with the landings a similarity plus a Gaussian field on
-    ``controls`` nodes, both refitted to the transport's barycentres every round, the
-    field's width annealed from ``widths[0]`` to ``widths[1]``."""
+def level_cubes(x, y, start):
+    """What refine's level sets up from ``start``: the source's node count, the cube
+    width, the source's areas, its nodes' cubes, both summaries (means and masses)."""
     m, n = len(x), len(y)
     spacing = cKDTree(y).query(y, k=2)[0][:, 1].mean()
     width = max(spacing * np.sqrt(n / max(start, 1)) / C._STEP, spacing)
@@ -142,6 +141,14 @@ def joint_level(x, z, y, start, widths=(1.0, 0.3), rounds=200, ridge=1e-3, contr
     label = C._cells(x, width)
     xc, mu = C._means(label, x, wx)
     yc, nu = C._means(C._cells(y, width), y, wy)
+    return m, width, wx, label, xc, mu, yc, nu
+
+
+def joint_level(x, z, y, start, widths=(1.0, 0.3), rounds=200, ridge=1e-3, controls=300):
+    """Refine's first level with the landings a similarity plus a Gaussian field on
+    ``controls`` nodes, both refitted to the transport's barycentres every round, the
+    field's width annealed from ``widths[0]`` to ``widths[1]``."""
+    m, width, wx, label, xc, mu, yc, nu = level_cubes(x, y, start)
     zc = C._means(label, z, wx)[0]
     ctr = xc[even_subset(xc, controls)]
     sim = weighted_similarity(xc, zc, mu)
@@ -188,13 +195,7 @@ def coherent(x, z, y, nodes=2000, controls=300, widths=(1.0, 0.4), lam=2.0, roun
 def posed_level(x, z, y, start, smoothing=HUGE_SMOOTHING):
     """Refine's level from ``start`` with a similarity step every round: the pulls'
     weighted best similarity moves every node, the rest is smoothed as refine does."""
-    m, n = len(x), len(y)
-    spacing = cKDTree(y).query(y, k=2)[0][:, 1].mean()
-    width = max(spacing * np.sqrt(n / max(start, 1)) / C._STEP, spacing)
-    wx, wy = C._area(x), C._area(y) * (m / n)
-    label = C._cells(x, width)
-    xc, mu = C._means(label, x, wx)
-    yc, nu = C._means(C._cells(y, width), y, wy)
+    m, width, wx, label, xc, mu, yc, nu = level_cubes(x, y, start)
     smooth, graph = C._smoother(xc, mu, x, smoothing * width), None
     for i in range(C._COARSE_ROUNDS[len(mu) >= C._FEW * m]):
         zc = C._means(label, z, wx)[0]
