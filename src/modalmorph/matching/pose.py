@@ -53,8 +53,12 @@ _COMMON_MARGIN = 2.0  # common frame / best total: shared hearts <= 1.51, turned
 # x [0.8, 1, 1.5] and 4 other stretches) at most 1.44 (the box; pairs turned 180 deg
 # before: torus, capsule, box); benchmarks/match3d.py's 6 shapes turned 30-180 deg
 # (base, cut, uneven, warp25; 1000 points) at least 1.78 (sampled unevenly), else 1.96.
+# A mean hides a small feature (a cylinder's knob, a torus's bump: turned 45-180 deg,
+# 1.03-1.56): the farthest of both ways' nearest distances must also lie within
+# _COMMON_FARTHEST of the turned pose's (the knob 1.59-3.89; the stretched bodies 0.48-1.00).
 _COMMON_GAP = 1.05
 _COMMON_GAP_3D = 1.6
+_COMMON_FARTHEST = 1.25
 # 3D point sets: trimmed nearest-point rounds (ICP) from many starts on few nodes, the
 # best few again on more nodes; the trimming distance shrinks from the size (normalised:
 # 1) to _TRIM coarse spacings. Measured on benchmarks/match3d.py, 1000 points, medians in
@@ -348,17 +352,26 @@ def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray, modal: Similarity) 
              if score <= _CLOSE * low]
     totals = [trusted_pairs(costs, sim.apply(costs.x), sub)[1] for sim in close]
     best = int(np.argmin(totals))
+    turned = p.rotation == "auto" and _turn(close[best]) > _COMMON_ANGLE
     if p.rotation == "auto":  # the common frame, as in 2D: kept unless far costlier
-        turn = [_turn(s) for s in close]
-        near = [k for k in range(len(close)) if turn[k] <= _COMMON_ANGLE]
+        near = [k for k, s in enumerate(close) if _turn(s) <= _COMMON_ANGLE]
         if near and min(totals[k] for k in near) <= _COMMON_MARGIN * totals[best]:
-            best = min(near, key=totals.__getitem__)
-        elif turn[best] > _COMMON_ANGLE:  # unless the common frame lies as near
-            still = _trimmed_icp(x, y, Similarity(np.eye(3), 1.0, np.zeros(3)), trim, False)
-            if still[0] <= _COMMON_GAP_3D * low:
-                close[best] = still[1]
+            best, turned = min(near, key=totals.__getitem__), False
     sim = _trimmed_icp(x, y, close[best], trim, rotate)[1]
+    if turned:  # unless the common frame lies as near, its farthest node too
+        still = _trimmed_icp(x, y, Similarity(np.eye(3), 1.0, np.zeros(3)), trim, False)
+        if still[0] <= _COMMON_GAP_3D * low and \
+                _farthest(still[1], x, y) <= _COMMON_FARTHEST * _farthest(sim, x, y):
+            sim = _trimmed_icp(x, y, still[1], trim, rotate)[1]
     return Pose(sim, sim, False, rotate, False)
+
+
+def _farthest(sim: Similarity, x: np.ndarray, y: np.ndarray) -> float:
+    """The largest of both ways' nearest-node distances between the source nodes ``x``
+    placed by ``sim`` and the target nodes ``y``: what a small feature left unmatched
+    shows, which a mean hides."""
+    z = sim.apply(x)
+    return float(max(cKDTree(y).query(z)[0].max(), cKDTree(z).query(y)[0].max()))
 
 
 def _turn(sim: Similarity) -> float:
