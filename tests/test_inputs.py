@@ -92,6 +92,11 @@ def test_image_coordinates_written_to_csv_read_back_as_image_coordinates(tmp_pat
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         read_pair(written, svg, ReadOptions())
+    csv = _write_csv(tmp_path / "p.csv", _glyph_p())  # the shapes lie in the target's frame
+    save_result(mm.morph(read_shape(csv, flip_y=True), shape), tmp_path / "out2")
+    assert y_down(read_shape(tmp_path / "out2" / "final_shape.csv"))
+    save_result(mm.morph(shape, read_shape(csv)), tmp_path / "out3")
+    assert not y_down(read_shape(tmp_path / "out3" / "final_shape.csv"))
 
 
 def test_mixed_y_directions_warn_once_and_flip_y_mirrors(tmp_path):

@@ -231,3 +231,14 @@ def test_a_template_of_the_other_foot_is_said(caplog):
     assert "3 of 3 images look like the other foot" in caplog.text
     for a, b in zip(same, other, strict=True):  # the mirror image costs more: 0.09-0.40
         assert b.energy > a.energy + 0.05  # against 0-0.15 as given
+
+
+def test_a_template_of_another_plate_size_is_refused():
+    """A template image of another size than the images: one line naming both sizes (a
+    numpy broadcasting error before)."""
+    from modalmorph import register_footprints
+
+    stack = synthetic_stance()
+    with pytest.raises(InputFileError, match="template: an image of 30 x 20 sensors, the "
+                                             "images 40 x 20"):
+        register_footprints(stack[4:7], template=stack[5][:30], threshold=5.0)

@@ -476,6 +476,10 @@ def register_footprints(images, *, template: int | str | None = None,
     base = stack.mean(axis=0) if isinstance(template, str) and template == "mean" else \
         stack[template] if isinstance(template, int | np.integer) else \
         check_pressure(template, "template")[0]
+    if base.shape != stack.shape[1:]:
+        raise InputFileError(f"template: an image of {base.shape[0]} x {base.shape[1]} "
+                             f"sensors, the images {stack.shape[1]} x {stack.shape[2]}: "
+                             "a template shares the plate's sensors")
     ref = footprint_parts(base, level, opts)
     spacing = opts.spacing * opts.pixel_size
     shapes = [Shape(resample(b, max(MIN_PART_NODES, math.ceil(_perimeter(b) / spacing))))

@@ -52,17 +52,19 @@ SAME = 1e-12
 
 def outline_slides(first: Shape, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``Track.slide`` and ``Track.slid``: per frame, the largest :func:`contour_slide` over
-    the contours of frame 0, said beyond :data:`SLIDE_FRACTION` of the outline and
-    :data:`SLIDE_SPACINGS` node spacings (closed 2D contours only; else NaN and
-    False)."""
+    the contours of frame 0 that explains their misfit (leaves at most
+    :data:`SLIDE_GAIN` of it; else 0: a change of shape, such as a circle growing into an
+    ellipse, is fitted by many shifts, none a slide), said beyond :data:`SLIDE_FRACTION`
+    of the outline and :data:`SLIDE_SPACINGS` node spacings (closed 2D contours only;
+    else NaN and False)."""
     n_frames = len(points)
     if first.dim != 2 or not first.closed or not first.ordered or first.faces is not None:
         return np.full(n_frames, np.nan), np.zeros(n_frames, dtype=bool)
     largest, slid = np.zeros(n_frames), np.zeros(n_frames, dtype=bool)
     for rows in first.slices:
         shift, gain = contour_slide(points[:, rows])
-        least = max(SLIDE_FRACTION, SLIDE_SPACINGS / len(points[0, rows]))
-        said = (np.abs(shift) > least) & (gain <= SLIDE_GAIN)
+        shift = np.where(gain <= SLIDE_GAIN, shift, 0.0)
+        said = np.abs(shift) > max(SLIDE_FRACTION, SLIDE_SPACINGS / len(points[0, rows]))
         larger = np.abs(shift) > np.abs(largest)
         largest[larger], slid = shift[larger], slid | said
     return largest, slid

@@ -381,7 +381,7 @@ def resample(points, n: int, *, closed: bool = True):
         Ordered nodes; or an ordered :class:`Shape`, whose contours are resampled each,
         ``n`` nodes shared among them by length (:func:`resampled_counts`).
     n : int
-        Number of nodes wanted, >= 3.
+        Number of nodes wanted, >= 3 (2 for an open polyline; per contour of a Shape).
     closed : bool, optional
         Whether the polyline closes on itself (then the first node is kept and the last
         segment is included); a Shape's own is used.
@@ -394,14 +394,19 @@ def resample(points, n: int, *, closed: bool = True):
         if not points.ordered:
             raise ShapeError("resample takes ordered contours; coarsen() spreads a subset "
                              "of a point set")
+        least = (3 if points.closed else 2) * len(points.sizes)
+        if n < least:
+            raise ShapeError(f"n must be >= {least} for {len(points.sizes)} "
+                             f"{'closed' if points.closed else 'open'} contour(s), got {n}")
         counts = resampled_counts([points.points[r] for r in points.slices], n, points.closed)
         parts = [resample(points.points[r], c, closed=points.closed)
                  for r, c in zip(points.slices, counts, strict=True)]
         return Shape(np.vstack(parts), closed=points.closed, frame=points.frame,
                      contours=tuple(counts) if len(counts) > 1 else None)
     pts = np.asarray(points, dtype=np.float64)
-    if n < 3:
-        raise ShapeError(f"n must be >= 3, got {n}")
+    if n < (3 if closed else 2):
+        raise ShapeError(f"n must be >= {3 if closed else 2} for a "
+                         f"{'closed' if closed else 'open'} polyline, got {n}")
     path = np.vstack([pts, pts[:1]]) if closed else pts
     s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))]
     t = np.linspace(0.0, s[-1], n, endpoint=not closed)

@@ -4,6 +4,7 @@ become a :class:`~modalmorph.core.shape.Shape` (:func:`make_shape`)."""
 from __future__ import annotations
 
 import logging
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -168,12 +169,14 @@ def _resampled(name: str, pts, nodes: int, closed: bool, contours
             break
         dropped += [keep[i] for i in worse]
         keep = [k for i, k in enumerate(keep) if i not in worse]
-    if grown or dropped:
-        _log.info("%s: resampled to %d nodes, %s%s%s (details finer than the node spacing; "
-                  "nodes=N for another count)", name, nodes,
-                  f"contour(s) {_listed(grown)} crossed themselves: given more nodes, "
-                  f"{sum(counts)} in all" if grown else "", "; " if grown and dropped else "",
-                  f"contour(s) {_listed(dropped)} crossed another: dropped" if dropped else "")
+    if grown:
+        _log.info("%s: resampled to %d nodes, contour(s) %s crossed themselves (a detail "
+                  "finer than their node spacing): given more nodes, %d in all (nodes=N for "
+                  "another count)", name, nodes, _listed(grown), sum(counts))
+    if dropped:
+        warnings.warn(f"{name}: resampled to {nodes} nodes, contour(s) {_listed(dropped)} "
+                      "crossed another (closer to it than the node spacing) and were dropped; "
+                      "more nodes (nodes=N) keep them", stacklevel=4)
     return np.vstack(parts), (tuple(counts) if len(counts) > 1 else None)
 
 

@@ -66,7 +66,7 @@ def save_result(morph, out_dir, *, options: dict | None = None,
             pairs=_pairs_array(morph), **_contours(morph.source))
     write_points(out_dir / "final_shape.csv", shapes[-1],
                  contours=getattr(morph.source, "contours", None),
-                 frame=getattr(morph.source, "frame", None))
+                 frame=getattr(morph.target, "frame", None))  # the shapes' frame
 
 
 def _contours(source) -> dict:
