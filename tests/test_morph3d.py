@@ -162,3 +162,4 @@ def test_a_source_of_a_few_vertices_is_not_said_to_reach_a_fine_target():
     assert not r.converged, r.message
     assert r.distance > 20 * r.tolerance  # 0.39 against 0.005 measured
     assert "0 nodes" not in r.message
+    assert "the source has 8 vertices for the target's 642" in r.message  # subdivide it

@@ -253,6 +253,9 @@ def _coarse_source(stop, run, target: Shape, folded: bool) -> str:
         return ""
     src, tgt = ("the source", "the target's") if partners is None else \
         (f"source contour {partners[0]}", f"target contour {partners[1]}'s")
+    if not coarse and target.dim == 3:  # a handful of vertices (stop.PLANE)
+        return (f"; the source has {m} vertices for the target's {n}: its triangles are "
+                "its shape; with more vertices (subdivided) it may follow the target closer")
     if not coarse:
         return (f"; {src} has {m} nodes for {tgt} {n}: resampled to more nodes (as many "
                 "as the target's, evenly spaced) it may follow the target closer")

@@ -249,9 +249,18 @@ class SurfaceStop(StopTest):
         # vertices for quadrics (a box of 8 onto a sphere: its faces are the shape)
         self.source_faces = source_faces if m is not None and (
             m >= len(target) or m <= PLANE) else None
+        self.few = (0.0, m, len(target), None) if source_faces is not None and \
+            m is not None and m <= PLANE < len(target) else None
         self.band = faces is not None and m is not None and m > len(target)
         quadrics = faces is None or self.source_faces is None  # whose floor hides
         self.pairs = quadrics and self.floor > COARSE_FLOOR * limits.tolerance
+
+    @property
+    def resolution(self) -> tuple[float, int, int, tuple | None]:
+        """For a surface of at most ``PLANE`` vertices onto a finer target, its and the
+        target's counts (no allowance: its triangles are the shape); else not
+        measured."""
+        return self.few or super().resolution
 
     def distance(self, current: np.ndarray, near: float, lazy: bool = True) -> float:
         if lazy and near > self.gate:
