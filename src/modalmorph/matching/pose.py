@@ -230,8 +230,8 @@ def contour_pose(p: Problem) -> Pose:
     if p.rotation == "auto":
         total_near, Cn, rev_near, rn = (total, Cb, reverse, r) if near[r] else _pose_search(
             C, low, np.flatnonzero(near), p.closed, SKIP, repeat)
-        x, y = p.src.normalized[ci], p.tgt.normalized[cj]
-        if total_near <= _COMMON_MARGIN * total or _as_near(x @ rots[rn].T, x @ rots[r].T, y):
+        if total_near <= _COMMON_MARGIN * total or _as_near(  # x[ci] only where needed
+                *(p.src.normalized[ci] @ rots[k].T for k in (rn, r)), p.tgt.normalized[cj]):
             Cb, reverse, common, rotate = Cn, rev_near, evidence[r], False
     jj, _ = ordered_pairs(Cb, p.closed, SKIP, repeat)
     keep = jj >= 0
