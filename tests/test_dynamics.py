@@ -167,3 +167,23 @@ def test_newmark_with_a_lift_is_newmark_on_the_lifted_matrix_bitwise():
     for y in (x, np.zeros(30)):
         assert np.array_equal(a.stiffness_dot(y), lifted @ y)
     assert np.array_equal(K, kept)
+
+
+@pytest.mark.parametrize("run", [[39, 0], [39, 0, 1], [38, 39, 0, 1]])
+def test_one_source_node_per_target_node_even_where_the_run_wraps(run):
+    """A denser closed source whose nodes ``run`` share a partner across the wrap keeps one
+    of them matched (review15: such a run was cut in two, both halves kept a node, and
+    the two were pulled onto one point, which folded the last step)."""
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    src = np.c_[np.cos(t), np.sin(t)]
+    tgt = 1.2 * src[::2]  # 20 nodes
+    partner = np.arange(40) // 2  # nodes 2k, 2k+1 share partner k
+    partner[run] = 0
+    partner[1 if 1 not in run else 2] = 1
+    pairs = np.c_[np.arange(40), partner]
+    loads = LoadTargets(src, tgt, pairs, ordered=True, closed=(True, True), rule="arclength")
+    kept = loads.pairs
+    assert np.array_equal(np.sort(kept[:, 1]), np.unique(partner))  # one node per partner
+    x = loads.targets(src)
+    gaps = np.linalg.norm(np.diff(np.r_[x, x[:1]], axis=0), axis=1)
+    assert gaps.min() > 0.3 * gaps.mean()  # spread along the target, none piled up

@@ -116,7 +116,7 @@ class LoadTargets:
             self.turn = _turn(self.partner[self.matched], len(target), closed) or (
                 _orientation(source) * _orientation(target) if closed else 0)
         if ordered and rule == "arclength" and len(pairs) > 1:
-            self._release_shared()
+            self._release_shared(closed)
             self._release_to_cover(closed, target_closed)
         elif not ordered and source.shape[1] == 3 and len(pairs) > 1:
             self._release_shared_points()
@@ -145,13 +145,17 @@ class LoadTargets:
         idx = np.flatnonzero(self.matched)
         return np.c_[idx, self.partner[idx]]
 
-    def _release_shared(self) -> None:
+    def _release_shared(self, closed: bool) -> None:
         """Keep one source node per target node: of consecutive matched nodes that share
         a partner (a denser source), the middle one stays matched and the others join the
         arclength rule, which spreads them between the neighbouring partners. Pulled onto
-        one point they would end with zero-length segments that fold."""
+        one point they would end with zero-length segments that fold. On a closed source
+        a run may wrap past the last node to the first."""
         midx = np.flatnonzero(self.matched)
         part = self.partner[midx]
+        turns = np.flatnonzero(part[1:] != part[:-1])
+        if closed and turns.size and part[0] == part[-1]:  # start where a run starts
+            midx, part = np.roll(midx, -turns[0] - 1), np.roll(part, -turns[0] - 1)
         start = np.r_[True, part[1:] != part[:-1]]
         run = np.cumsum(start) - 1  # run id of each matched node (consecutive, same partner)
         first = np.flatnonzero(start)
