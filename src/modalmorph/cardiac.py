@@ -48,7 +48,7 @@ from .io.images import MIN_OBJECT_PIXELS, choose_objects
 from .options import MatchOptions, MorphOptions, StrainOptions, TrackOptions
 from .tracking import track
 
-__all__ = ["Strain", "KINDS", "strain", "wall_strain", "mask_ring",
+__all__ = ["Strain", "KINDS", "strain", "wall_strain", "mask_ring", "rounding_stretch",
            "DEFINITIONS"]
 
 log = logging.getLogger(__name__)
@@ -72,8 +72,9 @@ DEFINITIONS = {
     "tracking": "every frame reached from the first frame by a morph; by default "
                 "(correspondence normal) each node paired with the point where the "
                 "contour's normal meets the frame's contour, as a contour shows no motion "
-                "along itself; the node paths smoothed over time (smooth_frames, cines of "
-                "10 frames or more)",
+                "along itself (made round first: on an elliptical wall, its rays from the "
+                "centre); the node paths smoothed over time (smooth_frames, cines of 24 "
+                "frames or more)",
 }
 CONTOUR_FILES = (".csv", ".tsv", ".txt", ".json", ".svg")  # read as contours, not masks
 # A hole smaller than a 3 x 3 block is a speck, not a ventricle: io's measured
@@ -100,6 +101,16 @@ TRACK_REFERENCE = "first"
 # with the smoothing below 0.6/0.8/0.6, and with 0.2 px boundary noise 1.3/1.7/0.9 (nearest
 # pairs: 2.5/8.9/4.2; benchmarks/strain.py). The phantoms' reference walls are circles,
 # whose normals are their radii: they cannot tell this rule from a radial motion.
+# "normal" tracks the walls made round (rounding_stretch): an elliptical wall shrinking
+# about its centre moves its material points along its rays, not its normals, and the
+# normal pairs slid them towards the long axis (segments 2 and 5 of an ellipse of aspect
+# 1.3 at -12 % against -17 %; pixels of 1.5 x 0.8 mm: -7 against -18). Made round (an
+# area-keeping stretch of the reference endocardium's second moments to a circle, the
+# identity on the circular phantoms), the normals are those rays: worst segment
+# circumferential error on the ellipses 1.15/1.3/1.5x0.8 mm pixels 3.6/6.4/12.9 -> 0.4/0.4/0.7
+# points, the circular phantoms unchanged (benchmarks/strain.py --modes; False: plain
+# normals, for that comparison).
+ROUNDING = True
 # The morph's stop tolerance (MorphOptions.tol, a fraction of the RMS radius) for the
 # strain: the default 0.005 leaves the nodes up to 0.09 px short of their partners, 0.9
 # points of radial strain on a 10 px wall (global radial error 1.42 -> 0.71 on the
@@ -107,13 +118,24 @@ TRACK_REFERENCE = "first"
 MORPH_TOL = 0.001
 # StrainOptions.smooth_frames (a Gaussian over time, sigma in frames, on every frame and
 # the reference too: its segmentation error would otherwise bias every strain) applies to
-# sequences of at least this many frames: a cine sampling the cycle, not a pair ED -> ES
-# (there it would pull the last frame towards the reference). On the noiseless phantoms
-# sigma = 1 frame takes the worst segment radial error 2.0/1.8/2.6 -> 1.2/1.0/1.6 points
-# (contract/akinetic/hypokinetic; pixelation jitter from frame to frame), with 0.2 px
-# boundary noise 8.6/8.7/7.7 -> 4.2/6.0/4.1; sigma 0.7 removes less (5.0/6.5/4.8), 1.5
-# and 2 bias the peaks (noiseless global circumferential error 0.2 -> 0.6 -> 1.1).
-SMOOTH_MIN_FRAMES = 10
+# cines of at least this many frames. On the noiseless phantoms sigma = 1 frame takes the
+# worst segment radial error 2.0/1.8/2.6 -> 1.2/1.0/1.6 points (contract/akinetic/
+# hypokinetic; pixelation jitter from frame to frame), with 0.2 px boundary noise
+# 8.6/8.7/7.7 -> 4.2/6.0/4.1; sigma 0.7 removes less (5.0/6.5/4.8), 1.5 and 2 bias the
+# peaks. But it flattens the cycle's peak on a short cine: error of the global peak
+# radial / circumferential strain of the contracting phantom, smoothed (unsmoothed about
+# +0.3 / 0.0), by frame count (benchmarks/strain.py --frames):
+#   frames           10     12     16     20     24     30     40
+#   radial        -3.79  -2.51  -1.56  -0.72  -0.39  -0.14  +0.18
+#   circumf.      +2.70  +1.92  +1.05  +0.65  +0.40  +0.22  +0.11
+# (review17: a 12-frame ring's peak radial 18.8 against 20.7). From 24 frames the peaks
+# stay within 0.4 points and the noisy worst segment radial error still halves
+# (6.5 -> 3.7 at 24 frames, 0.2 px noise); shorter cines are not smoothed.
+SMOOTH_MIN_FRAMES = 24
+# An RV insertion point nearer the ventricle's centre than this fraction of the reference
+# endocardium's mean radius gives no direction (a click on the centre): refused. The
+# insertion points lie on the epicardium, beyond 1.
+RV_MIN_DISTANCE = 0.5
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -139,7 +161,9 @@ class Strain:
         Reference frame; start of segment 1 (degrees).
     names : tuple of str
     tracks : tuple of Track
-        The tracking of the endocardium and of the epicardium.
+        The tracking of the endocardium and of the epicardium; with ``correspondence=
+        "normal"`` of the walls made round: their points times
+        ``params["rounding"]`` (transposed) are the walls' (:func:`rounding_stretch`).
     masks : ndarray or None, shape (F, H, W)
         The masks the contours came from (None for contour inputs).
     spacing : tuple of float
@@ -257,19 +281,43 @@ def strain(frames, *, options: StrainOptions | None = None,
         correspondence=opts.correspondence)
     kw = dict(options=topts, names=names, match_options=match_options,
               morph_options=_morph_options(morph_options))
-    tracks = [track(_observed([ring[k] for ring in rings], opts.nodes), **kw)
+    rounding = rounding_stretch(rings[0][0]) if opts.correspondence == "normal" and ROUNDING \
+        else np.eye(2)
+    tracks = [track(_observed([ring[k] @ np.linalg.inv(rounding).T for ring in rings],
+                              opts.nodes), **kw)
               for k in range(1 if opts.endo_only else 2)]
-    endo = _smoothed(tracks[0].points, opts)
-    epi = _smoothed(tracks[1].points, opts) if len(tracks) > 1 else \
+    endo = _smoothed(tracks[0].points @ rounding.T, opts)
+    epi = _smoothed(tracks[1].points @ rounding.T, opts) if len(tracks) > 1 else \
         np.zeros((len(endo), 0, 2))
     angle = _reference_angle(opts, endo[opts.reference_frame], masks, spacing)
     values = wall_strain(endo, epi, reference=opts.reference_frame, segments=opts.segments,
                          angle=angle)
     params = dict(opts.record(), reference_angle=angle, spacing=list(spacing), unit=unit,
+                  rounding=rounding.tolist(),
                   track=topts.record(), morph=kw["morph_options"].record())
     return Strain(**values, endo=endo, epi=epi, reference=opts.reference_frame,
                   reference_angle=angle, names=names, tracks=tuple(tracks),
                   masks=masks, spacing=spacing, params=params)
+
+
+def rounding_stretch(endo: np.ndarray) -> np.ndarray:
+    """The area-keeping linear map (2, 2) that takes a circle to the ellipse of the same
+    second moments as the area inside ``endo`` (m, 2): symmetric, determinant 1; the
+    identity for a circle. ``correspondence="normal"`` tracks the walls mapped by its
+    inverse (the reference endocardium made round), where the normals of an elliptical
+    wall are its rays from the centre (:data:`ROUNDING`)."""
+    x, y = (endo - polygon_centroid(endo)).T
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    cross = x * yn - xn * y
+    moments = np.array([[(x * x + x * xn + xn * xn) @ cross * 2,
+                         (x * yn + 2 * x * y + 2 * xn * yn + xn * y) @ cross],
+                        [0.0, (y * y + y * yn + yn * yn) @ cross * 2]])
+    moments[1, 0] = moments[0, 1]  # 24 x the second moments (Green's theorem), any sign
+    values, vectors = np.linalg.eigh(moments * np.sign(cross.sum()))
+    if values.min() <= 0:
+        return np.eye(2)
+    axes = np.sqrt(values / np.sqrt(values.prod()))
+    return (vectors * axes) @ vectors.T
 
 
 def _smoothed(points: np.ndarray, opts: StrainOptions) -> np.ndarray:
@@ -417,7 +465,8 @@ def _reference_angle(opts: StrainOptions, ref_endo, masks, spacing) -> float:
     width = 360.0 / opts.segments
     centre = polygon_centroid(ref_endo)
     if opts.rv_point is not None:
-        d = np.asarray(opts.rv_point) - centre
+        d = np.asarray(opts.rv_point, dtype=float) - centre
+        _check_rv_point(opts.rv_point, d, ref_endo, masks, spacing)
         return float(np.mod(np.degrees(np.arctan2(-d[1], d[0])) - width, 360.0))
     if opts.rv_label is not None:
         if masks is None:
@@ -430,6 +479,27 @@ def _reference_angle(opts: StrainOptions, ref_endo, masks, spacing) -> float:
         d = np.array([cols.mean() * spacing[0], rows.mean() * spacing[1]]) - centre
         return float(np.mod(np.degrees(np.arctan2(-d[1], d[0])) - 2 * width, 360.0))
     return float(opts.reference_angle)
+
+
+def _check_rv_point(point, d: np.ndarray, ref_endo: np.ndarray, masks, spacing) -> None:
+    """Refuse an RV point off the image (masks) or too near the centre for its direction
+    to mean anything (:data:`RV_MIN_DISTANCE`)."""
+    radius = np.linalg.norm(ref_endo - polygon_centroid(ref_endo), axis=1).mean()
+    where = f"rv_point ({point[0]:g}, {point[1]:g})"
+    if masks is not None:
+        h, w = masks.shape[1:]
+        low = -0.5 * np.asarray(spacing, float)
+        high = (np.array([w, h]) - 0.5) * np.asarray(spacing, float)
+        if np.any(np.asarray(point) < low) or np.any(np.asarray(point) > high):
+            raise OptionError(f"{where} lies outside the image: x {low[0]:g}..{high[0]:g}, "
+                              f"y {low[1]:g}..{high[1]:g} (image units, y down)")
+    if np.hypot(*d) < RV_MIN_DISTANCE * radius:
+        centre = polygon_centroid(ref_endo)
+        raise OptionError(f"{where} lies {np.hypot(*d):.3g} from the ventricle's centre "
+                          f"({centre[0]:.4g}, {centre[1]:.4g}), under {RV_MIN_DISTANCE:g} "
+                          f"x the endocardium's mean radius {radius:.3g}: its direction "
+                          f"(the start of the segments) means nothing; give the RV "
+                          f"insertion point on the wall")
 
 
 # ------------------------------------------------------------------------------ inputs
@@ -477,7 +547,8 @@ def mask_ring(mask, name: str, options: StrainOptions | None = None, *,
     """``(endocardium (m, 2), epicardium (m, 2) or None)`` of a myocardium mask.
 
     The wall is the ``label`` pixels (or every non-zero pixel); of several 8-connected
-    objects the chosen one (``object``, by io's rule; said in a warning, or to ``say``
+    objects the chosen one (``object``, by io's rule, except that ``"largest"`` takes the
+    largest object with a hole when the largest has none; said in a warning, or to ``say``
     when given); its largest hole is the endocardium, its outer boundary the epicardium,
     each resampled to ``nodes`` nodes, in ``(x, y) = (column, row) * spacing``.
     ``endo_only``: the hole, or without one the object's own boundary (a blood-pool
@@ -496,19 +567,59 @@ def mask_ring(mask, name: str, options: StrainOptions | None = None, *,
     if not wall.any():
         raise ShapeError(f"{name}: the mask is empty (no wall pixel)")
     say = say or (lambda text: warnings.warn(text, stacklevel=3))
-    wall = choose_objects(wall, opts.object, name, connectivity=2, say=say)[0]
-    holes, count = ndimage.label(ndimage.binary_fill_holes(wall) & ~wall)
+    ring = _ring_object(wall, opts, name, say)
+    holes, count = ndimage.label(ndimage.binary_fill_holes(ring) & ~ring)
     sizes = np.bincount(holes.ravel())[1:]
     if not count or sizes.max() < MIN_HOLE_PIXELS:
         if opts.endo_only:
-            return _outline(wall, spacing), None
+            return _outline(ring, spacing), None
         raise ShapeError(f"{name}: the wall has no hole (not a ring: no endocardium inside "
-                         f"an epicardium); check the label, or pass endo_only "
-                         f"(--endo-only) for endocardial strain only")
+                         f"an epicardium{_which(wall, opts)}); check the label, or pass "
+                         f"endo_only (--endo-only) for endocardial strain only")
     endo = _outline(holes == 1 + np.argmax(sizes), spacing)
     if opts.endo_only:
         return endo, None
-    return endo, _outline(ndimage.binary_fill_holes(wall), spacing)
+    return endo, _outline(ndimage.binary_fill_holes(ring), spacing)
+
+
+def _ring_object(wall: np.ndarray, opts: StrainOptions, name: str, say) -> np.ndarray:
+    """The wall's object: by default (``object="largest"``, a ring) the largest object
+    with a hole (a blood pool inside a larger solid blob is still the ventricle), said;
+    otherwise io's choice."""
+    from skimage.measure import label
+
+    labels, count = label(wall, connectivity=2, return_num=True)  # io's numbering
+    if opts.object != "largest" or opts.endo_only or count < 2:
+        return choose_objects(wall, opts.object, name, connectivity=2, say=say)[0]
+    area = np.bincount(labels.ravel(), minlength=count + 1)[1:]
+    ringed = [k for k in np.argsort(-area) if _has_hole(labels == k + 1)]
+    if not ringed or ringed[0] == np.argmax(area):
+        return choose_objects(wall, opts.object, name, connectivity=2, say=say)[0]
+    pick, largest = int(ringed[0]), int(np.argmax(area))
+    say(f"{name}: object {pick + 1} of {count} (the largest with a hole, a wall; object "
+        f"{largest + 1}, {area[largest]} px, has none): {area[pick]} px; object= chooses "
+        f"another")
+    return labels == pick + 1
+
+
+def _has_hole(region: np.ndarray) -> bool:
+    """Whether a region holds a hole of :data:`MIN_HOLE_PIXELS` or more."""
+    from scipy import ndimage
+
+    labels, count = ndimage.label(ndimage.binary_fill_holes(region) & ~region)
+    return bool(count) and np.bincount(labels.ravel())[1:].max() >= MIN_HOLE_PIXELS
+
+
+def _which(wall: np.ndarray, opts: StrainOptions) -> str:
+    """How the object without a hole was chosen, for the error."""
+    from skimage.measure import label
+
+    count = label(wall, connectivity=2, return_num=True)[1]
+    if count < 2:
+        return ""
+    if opts.object == "largest":
+        return f"; none of the mask's {count} objects has one"
+    return f"; object={opts.object!r} chose one of {count} objects, object= chooses another"
 
 
 def _outline(region: np.ndarray, spacing) -> np.ndarray:
