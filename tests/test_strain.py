@@ -349,7 +349,7 @@ def test_a_ring_beside_a_larger_solid_blob_is_taken_and_said(phantom):
     assert got.params["object"] == "largest" and np.isfinite(got.radial).all()
     solid = np.zeros_like(masks)
     solid[:, 10:30, 10:30] = solid[:, 60:70, 60:70] = True
-    with pytest.raises(ShapeError, match="none of the mask's 2 objects has one"):
+    with pytest.raises(ShapeError, match="none of the mask's objects has one"):
         mm.strain(solid)
 
 

@@ -1,40 +1,25 @@
 """``strain()``: radial and circumferential strain of the myocardium from segmented frames.
 
 A short-axis slice of the left-ventricle wall is a ring: the endocardium (the hole) inside
-the epicardium (the outer boundary). Both are tracked through the frames (:func:`track`),
-so every node is a material point of the wall (a contour shows no motion along itself:
-each reference node moves along the reference contour's normal, ``correspondence=
-"normal"``; the trajectories are smoothed over time, ``smooth_frames``), and the strains
-are Lagrangian, against the reference frame ``r`` (end-diastole, frame 0 by default), in
-percent:
+the epicardium (the outer boundary). Both are tracked through the frames (:func:`track`;
+``correspondence``, ``smooth_frames``: :data:`DEFINITIONS`), so every node is a material
+point of the wall, and the strains are Lagrangian, against the reference frame ``r``
+(end-diastole, frame 0 by default), in percent:
 
-- **radial**: at every endocardial node, the wall thickness ``T`` along the endocardium's
-  local normal at the reference frame, from the endocardial node to the epicardial material
-  point where the normal ray meets the epicardium (a fixed place between two epicardial
-  nodes, carried through the frames by them); ``radial = sum T_f / sum T_r - 1`` over the
-  chords of a segment (its mean thickening);
-- **circumferential**: length change of the midwall (the polyline through the chords'
-  midpoints), ``L_f / L_r - 1`` over the midwall stretches of a segment; the same of the
-  endocardium (``circumferential_endo``) and of the epicardium (``circumferential_epi``);
-- **segments**: ``N`` equal sectors by angle around the reference centre (the centroid of
-  the area inside the endocardium at the reference frame), segment 1 starting at the
-  reference angle and the others following counterclockwise as the image is shown (x to
-  the right, y down); every chord and stretch belongs to the sector of its midpoint at the
-  reference frame and keeps it (Lagrangian); segment 0 is the whole wall;
-- **strain rate**: the time derivative of each strain (central differences), per frame or
-  per second given the frame interval; **peaks**: the value of largest magnitude and its
-  frame.
-
-(The module is ``cardiac``, not ``strain``: a submodule named like the function would
-replace ``modalmorph.strain`` by itself once imported.)
+- **radial**, wall thickening along the endocardium's normals at the reference frame;
+- **circumferential**, the length change of the midwall (of the endocardium, the
+  epicardium: ``circumferential_endo``, ``circumferential_epi``);
+- by **segments**, equal sectors around the reference endocardium's centroid that the
+  material points keep; their **strain rate** and **peaks** (:data:`DEFINITIONS`, also
+  written into ``strain.json``).
 
 With ``endo_only=True`` (the blood pool, or endocardial contours) only the endocardial
-circumferential strain is measured; the other columns are NaN.
+circumferential strain is measured; the other columns are NaN. (The module is ``cardiac``:
+a submodule named ``strain`` would replace the function ``modalmorph.strain``.)
 """
 
 from __future__ import annotations
 
-import logging
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -50,8 +35,6 @@ from .tracking import track
 
 __all__ = ["Strain", "KINDS", "strain", "wall_strain", "mask_ring", "rounding_stretch",
            "DEFINITIONS"]
-
-log = logging.getLogger(__name__)
 
 KINDS = ("radial", "circumferential", "circumferential_endo", "circumferential_epi")
 DEFINITIONS = {
@@ -97,19 +80,14 @@ TRACK_REFERENCE = "first"
 # goes to where the reference contour's normal meets the frame's contour. A contour shows
 # no motion along itself, and "nearest" pairs slide towards a sector that moves less (up
 # to 10.5 degrees in the akinetic phantom): worst segment circumferential error on the
-# noiseless phantoms 1.6/8.3/4.0 -> 0.5/1.2/0.5 points (contract/akinetic/hypokinetic);
-# with the smoothing below 0.6/0.8/0.6, and with 0.2 px boundary noise 1.3/1.7/0.9 (nearest
-# pairs: 2.5/8.9/4.2; benchmarks/strain.py). The phantoms' reference walls are circles,
-# whose normals are their radii: they cannot tell this rule from a radial motion.
-# "normal" tracks the walls made round (rounding_stretch): an elliptical wall shrinking
-# about its centre moves its material points along its rays, not its normals, and the
-# normal pairs slid them towards the long axis (segments 2 and 5 of an ellipse of aspect
-# 1.3 at -12 % against -17 %; pixels of 1.5 x 0.8 mm: -7 against -18). Made round (an
-# area-keeping stretch of the reference endocardium's second moments to a circle, the
-# identity on the circular phantoms), the normals are those rays: worst segment
-# circumferential error on the ellipses 1.15/1.3/1.5x0.8 mm pixels 3.6/6.4/12.9 -> 0.4/0.4/0.7
-# points, the circular phantoms unchanged (benchmarks/strain.py --modes; False: plain
-# normals, for that comparison).
+# noiseless phantoms 1.6/8.3/4.0 -> 0.5/1.2/0.5 points (contract/akinetic/hypokinetic;
+# 0.2 px boundary noise, smoothed: 1.3/1.7/0.9, nearest pairs 2.5/8.9/4.2). But a shrinking
+# ellipse moves its points along its rays, and plain normals slid them to its long axis
+# (review17: segments 2 and 5 of aspect 1.3 at -12 % against -17 %, -7 against -18 with
+# 1.5 x 0.8 mm pixels): the walls are tracked made round (rounding_stretch), where those
+# rays are the normals; worst segment error on the ellipses 1.15/1.3/1.5 x 0.8 mm pixels
+# 3.6/6.4/12.9 -> 0.4/0.4/0.7, circular phantoms unchanged (benchmarks/strain.py --modes;
+# False: plain normals, for that comparison).
 ROUNDING = True
 # The morph's stop tolerance (MorphOptions.tol, a fraction of the RMS radius) for the
 # strain: the default 0.005 leaves the nodes up to 0.09 px short of their partners, 0.9
@@ -117,20 +95,12 @@ ROUNDING = True
 # contracting phantom with 0.001; same time, 0.6 s for 30 frames).
 MORPH_TOL = 0.001
 # StrainOptions.smooth_frames (a Gaussian over time, sigma in frames, on every frame and
-# the reference too: its segmentation error would otherwise bias every strain) applies to
-# cines of at least this many frames. On the noiseless phantoms sigma = 1 frame takes the
-# worst segment radial error 2.0/1.8/2.6 -> 1.2/1.0/1.6 points (contract/akinetic/
-# hypokinetic; pixelation jitter from frame to frame), with 0.2 px boundary noise
-# 8.6/8.7/7.7 -> 4.2/6.0/4.1; sigma 0.7 removes less (5.0/6.5/4.8), 1.5 and 2 bias the
-# peaks. But it flattens the cycle's peak on a short cine: error of the global peak
-# radial / circumferential strain of the contracting phantom, smoothed (unsmoothed about
-# +0.3 / 0.0), by frame count (benchmarks/strain.py --frames):
-#   frames           10     12     16     20     24     30     40
-#   radial        -3.79  -2.51  -1.56  -0.72  -0.39  -0.14  +0.18
-#   circumf.      +2.70  +1.92  +1.05  +0.65  +0.40  +0.22  +0.11
-# (review17: a 12-frame ring's peak radial 18.8 against 20.7). From 24 frames the peaks
-# stay within 0.4 points and the noisy worst segment radial error still halves
-# (6.5 -> 3.7 at 24 frames, 0.2 px noise); shorter cines are not smoothed.
+# the reference too) applies to cines of at least this many frames. Sigma 1 frame takes
+# the phantoms' worst segment radial error 2.0/1.8/2.6 -> 1.2/1.0/1.6 points, with 0.2 px
+# boundary noise 8.6/8.7/7.7 -> 4.2/6.0/4.1 (sigma 0.7: 5.0/6.5/4.8), but flattens the
+# peaks of a short cine: global peak radial / circumferential error -2.5/+1.9 points at
+# 12 frames (review17), -0.7/+0.7 at 20, -0.4/+0.4 at 24, -0.1/+0.2 at 30 (unsmoothed
+# +0.3/0.0; benchmarks/strain.py --frames, docs/guide/strain.md).
 SMOOTH_MIN_FRAMES = 24
 # An RV insertion point nearer the ventricle's centre than this fraction of the reference
 # endocardium's mean radius gives no direction (a click on the centre): refused. The
@@ -281,11 +251,10 @@ def strain(frames, *, options: StrainOptions | None = None,
         correspondence=opts.correspondence)
     kw = dict(options=topts, names=names, match_options=match_options,
               morph_options=_morph_options(morph_options))
-    rounding = rounding_stretch(rings[0][0]) if opts.correspondence == "normal" and ROUNDING \
-        else np.eye(2)
-    tracks = [track(_observed([ring[k] @ np.linalg.inv(rounding).T for ring in rings],
-                              opts.nodes), **kw)
-              for k in range(1 if opts.endo_only else 2)]
+    rounding = rounding_stretch(rings[0][0]) if opts.correspondence == "normal" and \
+        ROUNDING else np.eye(2)  # tracked made round, measured as they are
+    tracks = [track(_observed([r[k] @ np.linalg.inv(rounding).T for r in rings], opts.nodes),
+                    **kw) for k in range(1 if opts.endo_only else 2)]
     endo = _smoothed(tracks[0].points @ rounding.T, opts)
     epi = _smoothed(tracks[1].points @ rounding.T, opts) if len(tracks) > 1 else \
         np.zeros((len(endo), 0, 2))
@@ -293,8 +262,8 @@ def strain(frames, *, options: StrainOptions | None = None,
     values = wall_strain(endo, epi, reference=opts.reference_frame, segments=opts.segments,
                          angle=angle)
     params = dict(opts.record(), reference_angle=angle, spacing=list(spacing), unit=unit,
-                  rounding=rounding.tolist(),
-                  track=topts.record(), morph=kw["morph_options"].record())
+                  rounding=rounding.tolist(), track=topts.record(),
+                  morph=kw["morph_options"].record())
     return Strain(**values, endo=endo, epi=epi, reference=opts.reference_frame,
                   reference_angle=angle, names=names, tracks=tuple(tracks),
                   masks=masks, spacing=spacing, params=params)
@@ -321,8 +290,7 @@ def rounding_stretch(endo: np.ndarray) -> np.ndarray:
 
 
 def _smoothed(points: np.ndarray, opts: StrainOptions) -> np.ndarray:
-    """Tracked nodes (F, m, 2) smoothed over time (``smooth_frames``; sequences of
-    :data:`SMOOTH_MIN_FRAMES` frames or more)."""
+    """Nodes (F, m, 2) smoothed over time (cines of :data:`SMOOTH_MIN_FRAMES` frames+)."""
     if not opts.smooth_frames or len(points) < SMOOTH_MIN_FRAMES:
         return points
     from scipy.ndimage import gaussian_filter1d
@@ -340,8 +308,7 @@ def _morph_options(value) -> MorphOptions:
 
 def _observed(contours, nodes: int) -> list:
     """The contours to track: frame 0 with ``nodes`` nodes (the material points), the
-    others ``DENSE`` times denser, so a node pulled to its nearest observed node lands
-    within a fraction of its spacing of the curve (no snapping along it)."""
+    others ``DENSE`` times denser (a node pulled to its nearest one does not snap)."""
     return [resample(c, nodes if f == 0 else DENSE * nodes) for f, c in enumerate(contours)]
 
 
@@ -482,24 +449,20 @@ def _reference_angle(opts: StrainOptions, ref_endo, masks, spacing) -> float:
 
 
 def _check_rv_point(point, d: np.ndarray, ref_endo: np.ndarray, masks, spacing) -> None:
-    """Refuse an RV point off the image (masks) or too near the centre for its direction
-    to mean anything (:data:`RV_MIN_DISTANCE`)."""
-    radius = np.linalg.norm(ref_endo - polygon_centroid(ref_endo), axis=1).mean()
-    where = f"rv_point ({point[0]:g}, {point[1]:g})"
+    """Refuse an RV point off the image (masks) or nearer the centre than
+    :data:`RV_MIN_DISTANCE` (its direction means nothing)."""
+    where, spacing = f"rv_point ({point[0]:g}, {point[1]:g})", np.asarray(spacing, float)
     if masks is not None:
-        h, w = masks.shape[1:]
-        low = -0.5 * np.asarray(spacing, float)
-        high = (np.array([w, h]) - 0.5) * np.asarray(spacing, float)
+        low, high = -0.5 * spacing, (np.array(masks.shape[:0:-1]) - 0.5) * spacing
         if np.any(np.asarray(point) < low) or np.any(np.asarray(point) > high):
             raise OptionError(f"{where} lies outside the image: x {low[0]:g}..{high[0]:g}, "
                               f"y {low[1]:g}..{high[1]:g} (image units, y down)")
+    radius = np.linalg.norm(ref_endo - (point - d), axis=1).mean()
     if np.hypot(*d) < RV_MIN_DISTANCE * radius:
-        centre = polygon_centroid(ref_endo)
-        raise OptionError(f"{where} lies {np.hypot(*d):.3g} from the ventricle's centre "
-                          f"({centre[0]:.4g}, {centre[1]:.4g}), under {RV_MIN_DISTANCE:g} "
-                          f"x the endocardium's mean radius {radius:.3g}: its direction "
-                          f"(the start of the segments) means nothing; give the RV "
-                          f"insertion point on the wall")
+        raise OptionError(f"{where} lies {np.hypot(*d):.3g} from the ventricle's centre, "
+                          f"under {RV_MIN_DISTANCE:g} x the endocardium's mean radius "
+                          f"{radius:.3g}: it gives no direction for the segments; give the "
+                          f"RV insertion point on the wall")
 
 
 # ------------------------------------------------------------------------------ inputs
@@ -568,31 +531,31 @@ def mask_ring(mask, name: str, options: StrainOptions | None = None, *,
         raise ShapeError(f"{name}: the mask is empty (no wall pixel)")
     say = say or (lambda text: warnings.warn(text, stacklevel=3))
     ring = _ring_object(wall, opts, name, say)
-    holes, count = ndimage.label(ndimage.binary_fill_holes(ring) & ~ring)
-    sizes = np.bincount(holes.ravel())[1:]
-    if not count or sizes.max() < MIN_HOLE_PIXELS:
+    hole = _largest_hole(ring)
+    if not hole.any():
         if opts.endo_only:
             return _outline(ring, spacing), None
+        several = "" if np.array_equal(ring, wall) else (
+            "; none of the mask's objects has one" if opts.object == "largest" else
+            f"; object={opts.object!r} chose it, object= chooses another")
         raise ShapeError(f"{name}: the wall has no hole (not a ring: no endocardium inside "
-                         f"an epicardium{_which(wall, opts)}); check the label, or pass "
-                         f"endo_only (--endo-only) for endocardial strain only")
-    endo = _outline(holes == 1 + np.argmax(sizes), spacing)
+                         f"an epicardium{several}); check the label, or pass endo_only "
+                         f"(--endo-only) for endocardial strain only")
+    endo = _outline(hole, spacing)
     if opts.endo_only:
         return endo, None
     return endo, _outline(ndimage.binary_fill_holes(ring), spacing)
 
 
 def _ring_object(wall: np.ndarray, opts: StrainOptions, name: str, say) -> np.ndarray:
-    """The wall's object: by default (``object="largest"``, a ring) the largest object
-    with a hole (a blood pool inside a larger solid blob is still the ventricle), said;
-    otherwise io's choice."""
+    """The wall's object: io's choice, but for ``object="largest"`` (not ``endo_only``)
+    the largest object with a hole, a wall, when the largest has none (said)."""
     from skimage.measure import label
 
     labels, count = label(wall, connectivity=2, return_num=True)  # io's numbering
-    if opts.object != "largest" or opts.endo_only or count < 2:
-        return choose_objects(wall, opts.object, name, connectivity=2, say=say)[0]
     area = np.bincount(labels.ravel(), minlength=count + 1)[1:]
-    ringed = [k for k in np.argsort(-area) if _has_hole(labels == k + 1)]
+    ringed = [k for k in np.argsort(-area) if _largest_hole(labels == k + 1).any()] \
+        if opts.object == "largest" and not opts.endo_only and count > 1 else []
     if not ringed or ringed[0] == np.argmax(area):
         return choose_objects(wall, opts.object, name, connectivity=2, say=say)[0]
     pick, largest = int(ringed[0]), int(np.argmax(area))
@@ -602,24 +565,14 @@ def _ring_object(wall: np.ndarray, opts: StrainOptions, name: str, say) -> np.nd
     return labels == pick + 1
 
 
-def _has_hole(region: np.ndarray) -> bool:
-    """Whether a region holds a hole of :data:`MIN_HOLE_PIXELS` or more."""
+def _largest_hole(region: np.ndarray) -> np.ndarray:
+    """The largest hole of a region (bool), empty if none has :data:`MIN_HOLE_PIXELS`."""
     from scipy import ndimage
 
-    labels, count = ndimage.label(ndimage.binary_fill_holes(region) & ~region)
-    return bool(count) and np.bincount(labels.ravel())[1:].max() >= MIN_HOLE_PIXELS
-
-
-def _which(wall: np.ndarray, opts: StrainOptions) -> str:
-    """How the object without a hole was chosen, for the error."""
-    from skimage.measure import label
-
-    count = label(wall, connectivity=2, return_num=True)[1]
-    if count < 2:
-        return ""
-    if opts.object == "largest":
-        return f"; none of the mask's {count} objects has one"
-    return f"; object={opts.object!r} chose one of {count} objects, object= chooses another"
+    holes, count = ndimage.label(ndimage.binary_fill_holes(region) & ~region)
+    sizes = np.bincount(holes.ravel())[1:]
+    return holes == 1 + np.argmax(sizes) if count and sizes.max() >= MIN_HOLE_PIXELS \
+        else np.zeros_like(region)
 
 
 def _outline(region: np.ndarray, spacing) -> np.ndarray:

@@ -134,8 +134,8 @@ class RingPhantom:
         return np.array([np.sqrt(self.aspect), 1.0 / np.sqrt(self.aspect)])
 
 
-def ring_phantom(frames: int = 30, *, inner: float = 20.0,
-                 outer: float = 30.0, contraction: float = 0.3, twist: float = 0.0,
+def ring_phantom(frames: int = 30, *, radii: tuple = (20.0, 30.0),
+                 contraction: float = 0.3, twist: float = 0.0,
                  sector: tuple = (), noise: float = 0.0, seed: int = 0,
                  aspect: float = 1.0) -> RingPhantom:
     """A :class:`RingPhantom` rendered on :data:`SIZE` x :data:`SIZE` pixels.
@@ -144,7 +144,7 @@ def ring_phantom(frames: int = 30, *, inner: float = 20.0,
     ----------
     frames : int
         Number of frames F (end-diastole at 0, end-systole at ``F // 2``).
-    inner, outer : float
+    radii : (float, float)
         Endocardial and epicardial radii at end-diastole, pixels (clinical: LV 50-70 px
         across on a 128 x 128 cine slice).
     contraction : float
@@ -161,6 +161,7 @@ def ring_phantom(frames: int = 30, *, inner: float = 20.0,
         Long (x) over short (y) axis of the walls (1: circles).
     """
     size = SIZE  # the ring is centred, a quarter pixel off the grid
+    inner, outer = radii
     t = np.sin(np.pi * np.arange(frames) / max(frames - 1, 1)) ** 2
     centre = np.array([size / 2 - 0.25, size / 2 + 0.25])
     ph = RingPhantom(masks=np.zeros((frames, size, size), dtype=bool), centre=centre,
