@@ -45,8 +45,9 @@ class StrainOptions(Options):
         None, "label images: the myocardium's label (default: every non-zero pixel)",
         group="strain", kind="int")
     object: str | int = option(
-        "largest", "several objects in a mask: largest, center (nearest the image centre) or "
-        "a label number (1 = the first in reading order)", group="strain", kind="object",
+        "largest", "several objects in a mask: largest (the largest with a hole, a wall, "
+        "when the largest has none), center (nearest the image centre) or a label number "
+        "(1 = the first in reading order)", group="strain", kind="object",
         choices=OBJECTS)
     endo_only: bool = option(
         False, "masks of the blood pool or contours without an epicardium: endocardial "
