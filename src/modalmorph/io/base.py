@@ -80,10 +80,13 @@ def looks_open(name: str, pts: np.ndarray, contours=None) -> None:
     if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 3 or not np.isfinite(pts).all():
         return
     sizes = contours or (len(pts),)
+    if sum(sizes) != len(pts) or min(sizes) < 3:
+        return  # make_shape says what is wrong
     for k, p in enumerate(np.split(pts, np.cumsum(sizes)[:-1])):
-        edges = _edge_lengths(p, True)
+        with np.errstate(over="ignore", invalid="ignore"):  # absurd sizes: Shape refuses them
+            edges = _edge_lengths(p, True)
         median = float(np.median(edges))
-        if len(p) > 2 and edges[-1] >= edges.max() and edges[-1] > OPEN_LOOKING * median > 0:
+        if edges[-1] >= edges.max() and edges[-1] > OPEN_LOOKING * median > 0:
             which = f"contour {k}" if len(sizes) > 1 else "the contour"
             warnings.warn(f"{name}: {which} is closed by an edge from its last node back to "
                           f"its first {edges[-1] / median:.0f} times its median edge: if it "
