@@ -220,6 +220,29 @@ def test_npy_declaring_a_huge_array_is_refused(server):
     assert status == 413 and "objects" in answer["error"], answer
 
 
+def _fanout_svg(depth: int) -> bytes:
+    """Groups that each <use> the group below 10 times, ``depth`` deep (review17: 1.6 kB
+    at depth 6 drew a million triangles, the server growing without bound)."""
+    groups = "".join(f'<g id="p{i + 1}">' + f'<use xlink:href="#p{i}"/>' * 10 + "</g>"
+                     for i in range(depth))
+    return (f'<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/'
+            f'xlink"><defs><path id="p0" d="M0 0 L10 0 L10 10 Z"/>{groups}</defs>'
+            f'<use xlink:href="#p{depth}"/></svg>').encode()
+
+
+def test_svg_whose_uses_multiply_is_refused_before_it_is_drawn(server, monkeypatch):
+    svgelements = pytest.importorskip("svgelements")
+
+    def drawn(*args, **kwargs):
+        raise AssertionError("svgelements was asked to draw it")
+
+    monkeypatch.setattr(svgelements.SVG, "parse", drawn)
+    status, answer = _request(server, "POST", "/api/upload?name=fanout.svg", _fanout_svg(6))
+    assert status == 413 and answer["field"] == "max_svg_elements", answer
+    assert answer["error"].startswith("fanout.svg: 4691351 elements once each <use> is "
+                                      "expanded, the limit (max_svg_elements) is "), answer
+
+
 def test_deep_json_and_wrong_types_are_4xx_not_500(server):
     deep = b"[" * 20000 + b"]" * 20000
     status, answer = _request(server, "POST", "/api/run", deep)
@@ -464,6 +487,56 @@ def test_signals_stop_the_app_and_remove_its_folder(tmp_path, sig):
             expected = 130 if sig == signal.SIGINT else 0  # Ctrl-C: the interrupted code
             assert proc.wait(WAIT) == expected, proc.stderr.read()
             assert proc.stderr.read().strip().splitlines() == ["modalmorph app stopped"]
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait(WAIT)
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith("modalmorph-app-")]
+
+
+# A server whose reads never end (allocating as review17's SVG did), started as `modalmorph app`.
+_STUCK_APP = """
+import sys, threading
+from modalmorph.apps import routes
+from modalmorph.apps.cli import main
+
+def stuck(*args):
+    print("reading", file=sys.stderr, flush=True)
+    held = []
+    while not threading.Event().wait(0.2):
+        held.append(bytearray(2**20))
+
+routes._read_upload = stuck
+sys.exit(main(["app", "--port", "0"]))
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_signals_stop_the_app_while_a_read_never_ends(tmp_path, sig):
+    """review17: "modalmorph app stopped" was logged, and the process went on reading and
+    growing until kill -9 (the reader's thread was joined at exit)."""
+    env = {**os.environ, "TMPDIR": str(tmp_path), "PYTHONPATH": str(ROOT / "src")}
+    with subprocess.Popen([sys.executable, "-c", _STUCK_APP], env=env,
+                          stderr=subprocess.PIPE, text=True) as proc:
+        try:
+            port = int(re.search(r":(\d+)/", proc.stderr.readline()).group(1))
+            page = http.client.HTTPConnection("127.0.0.1", port, timeout=WAIT)
+            page.request("GET", "/")
+            token = re.search(r'mm-token" content="([^"]+)"',
+                              page.getresponse().read().decode()).group(1)
+            page.close()
+            upload = http.client.HTTPConnection("127.0.0.1", port, timeout=WAIT)
+            upload.request("POST", "/api/upload?name=a.csv", body=_csv(_circle()),
+                           headers={"X-Modalmorph-Token": token})
+            assert proc.stderr.readline().strip() == "reading"
+            proc.send_signal(sig)
+            expected = 130 if sig == signal.SIGINT else 0
+            assert proc.wait(WAIT) == expected, proc.stderr.read()
+            status = upload.getresponse().status
+            lines = proc.stderr.read().strip().splitlines()
+            assert lines[-1] == "modalmorph app stopped" and "Traceback" not in lines, lines
+            assert status == 503
+            upload.close()
         finally:
             if proc.poll() is None:
                 proc.kill()

@@ -126,6 +126,35 @@ def test_dask_local_cluster_and_resume(data, tmp_path):
     assert table.column("status").to_pylist() == ["skipped", "skipped", "failed", "skipped"]
 
 
+def test_svg_whose_uses_multiply_fails_its_item_on_dask_threads(tmp_path, monkeypatch):
+    """review17: Dask runs items on threads, where no alarm stops a read: a 1.6 kB SVG
+    whose <use>s multiply drew to the end. Refused by its count before it is drawn."""
+    distributed = pytest.importorskip(
+        "distributed", reason="Dask is an optional extra: pip install 'modalmorph[dask]'")
+    se = pytest.importorskip("svgelements")
+
+    def drawn(*args, **kwargs):
+        raise AssertionError("svgelements was asked to draw it")
+
+    monkeypatch.setattr(se.SVG, "parse", drawn)  # the workers are this process's threads
+    groups = "".join(f'<g id="p{i + 1}">' + f'<use href="#p{i}"/>' * 10 + "</g>"
+                     for i in range(6))
+    (tmp_path / "fanout.svg").write_text(
+        f'<svg xmlns="http://www.w3.org/2000/svg"><defs><path id="p0" d="M0 0 L10 0 L10 '
+        f'10 Z"/>{groups}</defs><use href="#p6"/></svg>')
+    _csv(tmp_path / "es.csv", load_heart("systole"))
+    (tmp_path / "m.csv").write_text("id,source,target\nbomb,fanout.svg,es.csv\n")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=":0") as cluster, \
+            distributed.Client(cluster) as client:
+        done = run(read_manifest(tmp_path / "m.csv"), tmp_path / "out",
+                   engine=Engine(client=client))
+    [result] = done.results
+    assert result.status == "failed"
+    assert result.error.endswith("fanout.svg: 4691351 elements once each <use> is expanded, "
+                                 "the limit (max_svg_elements) is 50000"), result.error
+
+
 def test_process_pool_from_the_command_line(data, tmp_path):
     out = tmp_path / "out"
     argv = ["batch", str(data / "m.csv"), "--out", str(out), "--engine", "processes",

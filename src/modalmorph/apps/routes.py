@@ -13,12 +13,14 @@ the token in :data:`~modalmorph.apps.guard.TOKEN_HEADER`.
 
 from __future__ import annotations
 
+import asyncio
 import html
 import json
 import logging
 import secrets
 import threading
 import uuid
+from concurrent.futures import Future
 from http import HTTPStatus
 from pathlib import Path
 
@@ -30,7 +32,8 @@ from starlette.responses import HTMLResponse, Response
 from starlette.routing import Route
 
 from ..io import SUPPORTED_EXTENSIONS, extension, read_shape
-from ..io.limits import LimitError, check_image, check_json, check_nifti, check_npy, check_npz
+from ..io import limits as file_limits
+from ..io.limits import LimitError
 from .form import check_run, examples, field_of, morph_options, parse_options
 from .guard import check_request, read_body, read_json
 from .jobs import Job, Jobs
@@ -163,14 +166,16 @@ def _read_upload(path: Path, name: str, nodes, threshold, limits: AppLimits):
     """The shape and its picture from a stored upload, every header checked first."""
     suffix = extension(path)
     if suffix == ".npy":
-        check_npy(path, limits.files)
+        file_limits.check_npy(path, limits.files)
     elif suffix == ".npz":
-        check_npz(path, limits.files)
+        file_limits.check_npz(path, limits.files)
     elif suffix == ".json":
-        check_json(path.read_bytes(), name, limits.files)
+        file_limits.check_json(path.read_bytes(), name, limits.files)
     elif suffix in (".nii", ".nii.gz"):
-        check_nifti(path, limits.files)
-    image = check_image(path, limits.files)
+        file_limits.check_nifti(path, limits.files)
+    elif suffix == ".svg":
+        file_limits.check_svg(path, limits.files, name)
+    image = file_limits.check_image(path, limits.files)
     shape = read_shape(path, nodes=nodes, threshold=threshold if image is not None else None)
     if shape.m > limits.max_nodes:
         raise Refused(HTTPStatus.REQUEST_ENTITY_TOO_LARGE, f"{name}: {shape.m} nodes, the "
@@ -181,6 +186,29 @@ def _read_upload(path: Path, name: str, nodes, threshold, limits: AppLimits):
     except (OSError, ValueError):
         picture = None
     return shape, picture
+
+
+async def _on_daemon_thread(limiter: anyio.CapacityLimiter, function, *args):
+    """``function(*args)`` on a daemon thread of its own, at most ``limiter``'s tokens at
+    once. A read runs off the main thread, where no alarm can stop it; the process
+    must still exit at Ctrl-C or SIGTERM while one runs (anyio's worker threads are joined
+    at exit: a read that never ended held the stopped app alive)."""
+    async with limiter:
+        future: Future = Future()
+
+        def work():
+            if future.set_running_or_notify_cancel():
+                try:
+                    future.set_result(function(*args))
+                except BaseException as exc:  # noqa: BLE001 - handed to the request
+                    future.set_exception(exc)
+
+        threading.Thread(target=work, name="modalmorph reader", daemon=True).start()
+        try:
+            return await asyncio.wrap_future(future)
+        except asyncio.CancelledError:  # the server stops: answered, the read left behind
+            raise Refused(HTTPStatus.SERVICE_UNAVAILABLE, "the app is stopping: the file was "
+                          "not read") from None
 
 
 async def _upload(request: Request, state: AppState) -> Response:
@@ -197,8 +225,8 @@ async def _upload(request: Request, state: AppState) -> Response:
     path = state.folder / f"{uuid.uuid4().hex}{suffix}"
     path.write_bytes(data)
     try:
-        shape, picture = await anyio.to_thread.run_sync(
-            _read_upload, path, name, nodes, threshold, limits, limiter=state.readers)
+        shape, picture = await _on_daemon_thread(
+            state.readers, _read_upload, path, name, nodes, threshold, limits)
     except (ValueError, OSError) as exc:  # the reader names the temporary file: use the user's
         text = str(exc).replace(str(path), name).replace(path.name, name)
         if isinstance(exc, LimitError):

@@ -78,6 +78,7 @@ def read_image(path: Path, name: str, options: ReadOptions) -> RawShape:
         with warnings.catch_warnings():
             warnings.simplefilter("error", Image.DecompressionBombWarning)
             with Image.open(path) as image:
+                _check_pixels(image)
                 grey = grey_levels(image, name)
     except (OSError, UnidentifiedImageError, Image.DecompressionBombWarning,
             Image.DecompressionBombError, ValueError) as exc:
@@ -85,6 +86,21 @@ def read_image(path: Path, name: str, options: ReadOptions) -> RawShape:
     parts = image_contours(grey, name, options)
     return RawShape(np.vstack(parts), frame=ImageFrame(image=os.fspath(path), size=grey.shape),
                     default_nodes=DEFAULT_NODES, contours=_sizes(parts))
+
+
+def _check_pixels(image) -> None:
+    """Refuse (ValueError), before decoding, an image of more pixels than Pillow's
+    decompression-bomb bound (``PIL.Image.MAX_IMAGE_PIXELS``). Pillow only warns between
+    1 and 2 times it, and the warning made an error above is lost when another thread
+    leaves its own ``warnings.catch_warnings`` meanwhile (the filters are global): this
+    check holds on any thread."""
+    from PIL import Image
+
+    width, height = image.size
+    limit = Image.MAX_IMAGE_PIXELS
+    if limit is not None and width * height > limit:
+        raise ValueError(f"{width} x {height} pixels, over Pillow's bound against "
+                         f"decompression bombs (PIL.Image.MAX_IMAGE_PIXELS = {limit})")
 
 
 def mask_shape(mask, name: str = "mask", *, label=None, nodes: int | None = None,

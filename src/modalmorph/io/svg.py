@@ -14,7 +14,10 @@ glyph "o" or "B", a ring: an outline and its holes) gives a shape of as many con
 the order drawn. Closed if every subpath ends with ``Z``, is a polygon, circle, ellipse or
 rect, or ends where it starts; contours mixing closed and open are refused. Coordinates
 are the file's user units (before any ``viewBox`` scaling), y pointing down
-(:data:`SVG_FRAME`).
+(:data:`SVG_FRAME`). A drawing of more than
+:data:`~modalmorph.io.limits.MAX_SVG_ELEMENTS` elements once each ``<use>`` is expanded
+(each draws the element it refers to again: a kilobyte can draw millions) is refused
+before it is drawn.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from ..core.shape import ImageFrame
 from ..errors import InputFileError
 from ..options import ReadOptions
 from .base import DEFAULT_NODES, RawShape
+from .limits import LimitError, check_svg
 
 __all__ = ["SVG_FRAME", "SVG_SAMPLES", "read_svg"]
 
@@ -67,6 +71,10 @@ def read_svg(path: Path, name: str, options: ReadOptions) -> RawShape:
     except ImportError:
         raise ImportError("reading SVG needs svgelements: pip install 'modalmorph[images]'"
                           ) from None
+    try:  # the drawing's size bounded before svgelements expands it (on any thread)
+        check_svg(path, name=name)
+    except LimitError as exc:
+        raise InputFileError(str(exc)) from None
     try:
         svg = se.SVG.parse(os.fspath(path))
     except (ET.ParseError, ValueError) as exc:
