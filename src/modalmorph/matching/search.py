@@ -97,12 +97,12 @@ def _untangle(t: np.ndarray, cost: np.ndarray, n: int, skip: float, strict: bool
     keep = np.ones(len(t), bool)
     while True:
         idx = np.flatnonzero(keep)
-        steps = np.diff(np.r_[t[idx], t[idx[:1]]]) % n  # to the next partner, cyclically
+        steps = np.diff(np.concatenate((t[idx], t[idx[:1]]))) % n  # to the next partner, cyclically
         if idx.size < 2 or steps.sum() <= n:  # round once (or all on one target)
             return keep
         k = int(np.argmax(steps))  # the step back, seen as nearly a whole turn
         r = np.roll(idx, -(k + 1))
-        u = t[r[0]] + np.r_[0, np.cumsum(np.roll(steps, -(k + 1))[:-1])]
+        u = t[r[0]] + np.concatenate(([0], np.cumsum(np.roll(steps, -(k + 1))[:-1])))
         first, last = u[0] + n, u[-1] - n  # how far each end may reach
         end = r[u >= first] if strict else r[u > first]
         start = r[u <= last] if strict else r[u < last]
