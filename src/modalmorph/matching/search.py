@@ -97,7 +97,7 @@ def _untangle(t: np.ndarray, cost: np.ndarray, n: int, skip: float, strict: bool
     keep = np.ones(len(t), bool)
     while True:
         idx = np.flatnonzero(keep)
-        steps = np.diff(np.concatenate((t[idx], t[idx[:1]]))) % n  # to the next partner, cyclically
+        steps = np.diff(np.concatenate((t[idx], t[idx[:1]]))) % n  # to the next partner
         if idx.size < 2 or steps.sum() <= n:  # round once (or all on one target)
             return keep
         k = int(np.argmax(steps))  # the step back, seen as nearly a whole turn
