@@ -253,7 +253,9 @@ def contour_pose(p: Problem) -> Pose:
     if reverse:
         jj = len(cj) - 1 - jj
     xs, ys = p.src.normalized[ci[keep]], p.tgt.normalized[cj[jj[keep]]]
-    return Pose(align(xs, ys, rotate=rotate), align(xs, ys), reverse, rotate, common)
+    turned = align(xs, ys)  # the same fit twice where the pose may rotate (immutable)
+    return Pose(turned if rotate else align(xs, ys, rotate=False), turned, reverse, rotate,
+                common)
 
 
 def _trimmed_icp(x: np.ndarray, y: np.ndarray, sim: Similarity, trim: float,
