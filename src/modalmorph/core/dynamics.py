@@ -158,10 +158,10 @@ class LoadTargets:
         turns = np.flatnonzero(part[1:] != part[:-1])
         if closed and turns.size and part[0] == part[-1]:  # start where a run starts
             midx, part = np.roll(midx, -turns[0] - 1), np.roll(part, -turns[0] - 1)
-        start = np.concatenate(([True], part[1:] != part[:-1]))  # np.r_'s, not its 10 us
+        start = np.r_[True, part[1:] != part[:-1]]
         run = np.cumsum(start) - 1  # run id of each matched node (consecutive, same partner)
         first = np.flatnonzero(start)
-        length = np.diff(np.concatenate((first, [len(midx)])))
+        length = np.diff(np.r_[first, len(midx)])
         keep = first + length // 2
         free = np.ones(len(midx), bool)
         free[keep] = False
@@ -209,7 +209,8 @@ class LoadTargets:
             midx = np.flatnonzero(self.matched)
             if len(midx) <= 2:
                 return
-            a, c = (midx, np.roll(midx, -1)) if closed else (midx[:-1], midx[1:])
+            a, c = ((midx, np.concatenate((midx[1:], midx[:1]))) if closed  # np.roll
+                    else (midx[:-1], midx[1:]))
             between = (c - a - 1) % m
             span = np.abs(self.partner[c] - self.partner[a])
             if target_closed:  # the partners' way round (the shorter where unknown)
@@ -267,7 +268,8 @@ class LoadTargets:
         cand_of = [np.tile(cand, len(nodes)) for nodes, cand in mean]
         self._node_of = np.concatenate(node_of) if mean else np.zeros(0, np.intp)
         self._cand_of = np.concatenate(cand_of) if mean else np.zeros(0, np.intp)
-        self._mean_nodes, self._seg = np.unique(self._node_of, return_inverse=True)
+        self._mean_nodes, self._seg = (np.unique(self._node_of, return_inverse=True) if mean
+                                       else (self._node_of, self._node_of))  # 12 us
         self._fixed = []
         for kind, nodes, cand in self._groups:
             if kind == "fixed":  # arclength rule: cand holds the targets themselves
@@ -465,7 +467,7 @@ def _turn(partners: np.ndarray, n: int, closed: bool) -> int:
     foot's nodes on the serif's top, 21.6 units off its foot."""
     if len(partners) < 2:
         return 0
-    ahead = np.roll(partners, -1) if closed else partners[1:]
+    ahead = np.concatenate((partners[1:], partners[:1])) if closed else partners[1:]  # roll
     here = partners if closed else partners[:-1]
     fwd, bwd = int(np.sum((ahead - here) % n)), int(np.sum((here - ahead) % n))
     return int(np.sign(bwd - fwd))
@@ -478,7 +480,8 @@ def _orientation(points: np.ndarray) -> int:
     if points.shape[1] != 2:
         return 0
     x, y = points.T
-    return int(np.sign(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y)))
+    x1, y1 = np.concatenate((x[1:], x[:1])), np.concatenate((y[1:], y[:1]))  # np.roll(-1)
+    return int(np.sign(np.dot(x, y1) - np.dot(x1, y)))
 
 
 def _span(a2, c2, n: int, turn: int):
