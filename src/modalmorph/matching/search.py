@@ -124,8 +124,9 @@ def _pairs_from_j(j: np.ndarray, cost: np.ndarray, one_to_one: bool):
     the pair's cost ``cost`` (m,) of every source node."""
     i = np.flatnonzero(j >= 0)
     pairs = _columns(i, j[i])
-    # a cyclic search may reuse a target once across the cut (rarely: a count finds it,
-    # 10 us against the stable sort and unique's 50 at 70 nodes)
+    # a cyclic search may reuse a target once across the cut (68 of the 142 searches of
+    # the 16 heart pairs at 70 nodes; a count finds it, 10 us against the stable sort and
+    # unique's 50; a loop over the shared targets instead was no faster)
     if one_to_one and len(pairs) and np.bincount(pairs[:, 1]).max() > 1:
         order = np.argsort(cost[i], kind="stable")
         _, first = np.unique(pairs[order, 1], return_index=True)
