@@ -52,6 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
+from modalmorph.core.quality import self_crossings
 from modalmorph.core.shape import Shape, resample
 from modalmorph.datasets import load_hand, load_heart
 from modalmorph.matching import match
@@ -113,8 +114,11 @@ def make_pair(family, rng):
         tgt = c + (tgt - c) @ R.T * rng.uniform(0.6, 1.4)
     if family in WARP:
         tgt = _warp(tgt, WARP[family], rng)
-    if family in ("noise", "combined"):
-        tgt = tgt + 0.02 * size * rng.standard_normal(tgt.shape)
+    if family in ("noise", "combined"):  # drawn again where it makes the contour cross
+        clean = tgt  # itself (a loop of 4-8 nodes: refused by match, as any such input)
+        tgt = clean + 0.02 * size * rng.standard_normal(tgt.shape)
+        while self_crossings(tgt):
+            tgt = clean + 0.02 * size * rng.standard_normal(tgt.shape)
     if family in ("rotation", "combined"):
         t = rng.uniform(-np.pi, np.pi)
         R = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])

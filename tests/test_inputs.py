@@ -99,6 +99,34 @@ def test_image_coordinates_written_to_csv_read_back_as_image_coordinates(tmp_pat
     assert not y_down(read_shape(tmp_path / "out3" / "final_shape.csv"))
 
 
+@pytest.mark.parametrize("ext", [".csv", ".txt", ".npz", ".json"])
+def test_every_shape_file_keeps_the_frame_it_was_written_in(tmp_path, ext):
+    """Image coordinates written to any shape file read back y down in their unit, and
+    a shape in y-up coordinates reads back y up (review16: only text files said it)."""
+    import modalmorph as mm
+    from modalmorph.io import write_points
+
+    svg = read_shape(_write_svg(tmp_path / "p.svg", _glyph_p()))
+    write_points(tmp_path / f"down{ext}", svg)
+    back = read_shape(tmp_path / f"down{ext}")
+    assert y_down(back) and back.frame.unit == svg.frame.unit
+    np.testing.assert_array_equal(back.points, svg.points)
+    write_points(tmp_path / f"up{ext}", mm.Shape(svg.points, closed=True))
+    assert not y_down(read_shape(tmp_path / f"up{ext}"))
+
+
+@pytest.mark.parametrize(("name", "body"), [
+    ("f.json", '{"points": [[0, 0], [1, 0], [0, 1]], "frame": {"y_down": "yes"}}'),
+    ("g.json", '{"points": [[0, 0], [1, 0], [0, 1]], "frame": [true]}'),
+    ("h.json", '{"points": [[0, 0], [1, 0], [0, 1]], "frame": {"y_down": true, "unit": 3}}')])
+def test_a_frame_said_wrongly_is_named(tmp_path, name, body):
+    (tmp_path / name).write_text(body)
+    from modalmorph.errors import InputFileError
+
+    with pytest.raises(InputFileError, match="y_down|frame|unit"):
+        read_shape(tmp_path / name)
+
+
 def test_mixed_y_directions_warn_once_and_flip_y_mirrors(tmp_path):
     csv = _write_csv(tmp_path / "p.csv", _glyph_p())
     svg = _write_svg(tmp_path / "p.svg", _glyph_p())

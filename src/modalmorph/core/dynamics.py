@@ -149,32 +149,28 @@ class LoadTargets:
 
     def _release_shared(self, closed: bool) -> None:
         """Keep one source node per target node: of consecutive matched nodes that share
-        a partner (a denser source), the middle one stays matched and the others join the
-        arclength rule, which spreads them between the neighbouring partners. Pulled onto
-        one point they would end with zero-length segments that fold. On a closed source
-        a run may wrap past the last node to the first."""
+        a partner (a denser source; on a closed one, also past its last node), the middle
+        one stays matched and the others join the arclength rule, which spreads them
+        between the neighbouring partners: on one point they would fold."""
         midx = np.flatnonzero(self.matched)
         part = self.partner[midx]
         turns = np.flatnonzero(part[1:] != part[:-1])
-        if closed and turns.size and part[0] == part[-1]:  # start where a run starts
+        if closed and turns.size and part[0] == part[-1]:  # begin where a run begins
             midx, part = np.roll(midx, -turns[0] - 1), np.roll(part, -turns[0] - 1)
         start = np.r_[True, part[1:] != part[:-1]]
         run = np.cumsum(start) - 1  # run id of each matched node (consecutive, same partner)
         first = np.flatnonzero(start)
         length = np.diff(np.r_[first, len(midx)])
-        keep = first + length // 2
-        free = np.ones(len(midx), bool)
-        free[keep] = False
-        free &= length[run] > 1
+        free = length[run] > 1
+        free[first + length // 2] = False  # the middle of each run stays
         self.matched[midx[free]] = False
         self.partner[midx[free]] = -1
 
     def _release_shared_points(self) -> None:
-        """3D point sets and surfaces: keep one source node per target node, of the matched nodes
-        that share a partner (a denser source) the one nearest their centroid; the others
-        move with their matched neighbours. Pulled onto one point they would bunch, off
-        the target's surface (an icosphere of 642 vertices onto one of 162 stopped 1.6 %
-        of the size off it, method.md §5)."""
+        """3D point sets and surfaces: of the matched nodes that share a partner (a denser
+        source), the one nearest their centroid stays; the others move with their matched
+        neighbours. On one point they bunch off the target's surface (an icosphere of 642
+        vertices onto one of 162 stopped 1.6 % of the size off it, method.md §5)."""
         midx = np.flatnonzero(self.matched)
         part = self.partner[midx]
         order = np.argsort(part, kind="stable")

@@ -201,14 +201,14 @@ def read_npy(path: Path, name: str, options: ReadOptions) -> RawShape:
 
 def read_npz(path: Path, name: str, options: ReadOptions) -> RawShape:
     """An .npz file's ``points`` (or only) array, its ``faces`` and ``closed``."""
-    points, faces, closed, contours = npz_arrays(path, name)
+    points, faces, closed, contours, frame = npz_arrays(path, name)
     return RawShape(_numeric(name, points, "'points'"), faces=faces, closed=closed,
-                    contours=contours)
+                    contours=contours, frame=frame)
 
 
 def npz_arrays(path: Path, name: str):
-    """An .npz file's ``points`` (or only) array as it is, its ``faces``, ``closed`` and
-    ``contours``."""
+    """An .npz file's ``points`` (or only) array as it is, its ``faces``, ``closed``,
+    ``contours`` and frame (``y_down`` and ``unit``: image coordinates)."""
     def load(p):
         with open(p, "rb") as fh, np.load(fh, allow_pickle=False) as data:
             return {key: data[key] for key in data.files}
@@ -230,7 +230,19 @@ def npz_arrays(path: Path, name: str):
     if faces is not None:
         faces = _faces(name, faces)
     contours = arrays.get("contours") if "points" in arrays else None
-    return points, faces, closed, _contours(name, contours)
+    said = {key: arrays[key].tolist() for key in ("y_down", "unit")
+            if key in arrays and "points" in arrays}
+    frame = _declared(name, said.get("y_down", False), said.get("unit"))
+    return points, faces, closed, _contours(name, contours), frame
+
+
+def _declared(name: str, y_down, unit) -> ImageFrame | None:
+    """The frame an .npz or JSON file declares: image coordinates where ``y_down``."""
+    if y_down is not True and y_down is not False:
+        raise InputFileError(f"{name}: y_down must be true or false, got {y_down!r:.40}")
+    if unit is not None and not isinstance(unit, str):
+        raise InputFileError(f"{name}: unit must be a string, got {unit!r:.40}")
+    return ImageFrame(unit=unit or "px") if y_down else None
 
 
 def _contours(name: str, counts) -> tuple[int, ...] | None:
@@ -270,7 +282,7 @@ def read_json(path: Path, name: str, options: ReadOptions) -> RawShape:
         raise InputFileError(f"{name}: not valid JSON: {exc}") from None
     except RecursionError:
         raise InputFileError(f"{name}: not readable JSON: nested too deeply") from None
-    closed = faces = contours = None
+    closed = faces = contours = frame = None
     if isinstance(data, dict):
         if "points" not in data:
             raise InputFileError(f"{name}: the JSON object has no \"points\" (keys: "
@@ -281,6 +293,11 @@ def read_json(path: Path, name: str, options: ReadOptions) -> RawShape:
         if data.get("faces") is not None:
             faces = _faces(name, data["faces"])
         contours = _contours(name, data.get("contours"))
+        declared = data.get("frame", {})
+        if not isinstance(declared, dict):
+            raise InputFileError(f"{name}: \"frame\" must be an object such as "
+                                 f"{{\"y_down\": true, \"unit\": \"px\"}}")
+        frame = _declared(name, declared.get("y_down", False), declared.get("unit"))
         data = data["points"]
     if not isinstance(data, list) or not all(isinstance(row, list) for row in data):
         raise InputFileError(f"{name}: expected a list of [x, y] or [x, y, z] lists")
@@ -299,7 +316,7 @@ def read_json(path: Path, name: str, options: ReadOptions) -> RawShape:
                 raise InputFileError(f"{name}: node {k}: an integer of {len(str(value))} digits "
                                      f"is too large for a coordinate")
     return RawShape(np.array(data, dtype=np.float64), faces=faces, closed=closed,
-                    contours=contours)
+                    contours=contours, frame=frame)
 
 
 def write_points(path, points, *, contours=None, frame=None) -> None:
@@ -320,7 +337,9 @@ def write_points(path, points, *, contours=None, frame=None) -> None:
         (a ``contour`` column, ``"contours"``); a Shape has its own.
     frame : ImageFrame, optional
         For an array: its frame; a Shape has its own. Image coordinates (y down) are
-        said on the first line of a text file (:data:`Y_DOWN`), and read back so.
+        said on the first line of a text file (:data:`Y_DOWN`), by ``y_down`` and
+        ``unit`` in an ``.npz``, by ``"frame": {"y_down": true, "unit": ...}`` in a
+        ``.json``, and read back so (an ``.npy`` holds the array only).
 
     Raises
     ------
@@ -340,6 +359,8 @@ def write_points(path, points, *, contours=None, frame=None) -> None:
         raise ValueError(f"{name}: cannot write {path.suffix!r} files; supported: "
                          f"{', '.join(WRITABLE)}")
     contours = shape.contours if shape is not None else _checked(contours, len(pts))
+    frame = shape.frame if shape is not None else frame
+    down = frame if frame is not None and frame.y_down else None
     with atomic_write(path) as tmp:
         if ext in TEXT_SEPARATORS:
             sep = TEXT_SEPARATORS[ext]
@@ -348,8 +369,7 @@ def write_points(path, points, *, contours=None, frame=None) -> None:
                    if contours else [[]] * len(pts))
             body = "".join(sep.join([*(repr(float(v)) for v in row), *c]) + "\n"
                            for row, c in zip(pts, ids, strict=True))
-            frame = shape.frame if shape is not None else frame
-            said = f"{Y_DOWN}, unit {frame.unit}\n" if frame is not None and frame.y_down else ""
+            said = f"{Y_DOWN}, unit {down.unit}\n" if down is not None else ""
             tmp.write_text(said + sep.join(names) + "\n" + body, encoding="utf-8")
         elif ext == ".npy":
             np.save(tmp, pts)
@@ -359,6 +379,8 @@ def write_points(path, points, *, contours=None, frame=None) -> None:
                 extra["closed"] = np.bool_(shape.closed)
                 if shape.faces is not None:
                     extra["faces"] = shape.faces
+            if down is not None:
+                extra.update(y_down=np.bool_(True), unit=np.str_(down.unit))
             np.savez(tmp, points=pts, **extra)
         else:
             data = {"points": pts.tolist(), **({"contours": list(contours)} if contours
@@ -367,4 +389,6 @@ def write_points(path, points, *, contours=None, frame=None) -> None:
                 data["closed"] = bool(shape.closed)
                 if shape.faces is not None:
                     data["faces"] = shape.faces.tolist()
+            if down is not None:
+                data["frame"] = {"y_down": True, "unit": down.unit}
             tmp.write_text(json.dumps(data) + "\n", encoding="utf-8")

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..core.align import Similarity, align
 from .features import Problem
-from .pose import Pose
+from .pose import COMMON_ANGLE, Pose
 from .search import REPEAT, Costs, pairs_at, total, trusted_pairs
 
 __all__ = ["Fit", "Placement", "fits", "alternate", "keep_or_turn"]
@@ -146,11 +146,19 @@ def alternate(fit: Fit, sim: Similarity, rotate: bool) -> Placement:
 def keep_or_turn(fit: Fit, final: Costs, placed: Placement, turned: Similarity
                  ) -> Placement:
     """The common frame won the pose search although a turned pose cost less: the
-    alternation from the turned pose replaces ``placed`` only if it lowers the objective
-    below ``_TURN_GAIN`` of its own (a shape turned by 5-45 degrees)."""
+    alternation from the turned pose replaces ``placed`` if it lowers the objective below
+    ``_TURN_GAIN`` of its own (a shape turned by 5-45 degrees), or lowers it at all with a
+    turn beyond the common frame's (more than ``COMMON_ANGLE``)."""
     free = alternate(fit, turned, True)
     everyone = np.arange(len(placed.z))
     free = replace(free, found=pairs_at(final, free.z, everyone))
     placed = replace(placed, found=pairs_at(final, placed.z, everyone))
-    gain = total(free.found, len(free.z)) < _TURN_GAIN * total(placed.found, len(placed.z))
+    ratio = total(free.found, len(free.z)) / total(placed.found, len(placed.z))
+    gain = ratio < _TURN_GAIN or (ratio < 1 and _angle(free.sim) > COMMON_ANGLE)
     return free if gain else placed  # with its final search, which settle() reuses
+
+
+def _angle(sim: Similarity) -> float:
+    """The angle of a similarity's rotation, degrees (2D or 3D)."""
+    d = len(sim.translation)
+    return float(np.degrees(np.arccos(np.clip((np.trace(sim.rotation) - (d - 2)) / 2, -1, 1))))

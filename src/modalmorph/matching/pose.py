@@ -37,7 +37,7 @@ _COARSE_NODES_CLOUD = 256  # the same for point sets, which have 4 poses only (n
 _ANGLES = 24  # rotations tried by the pose search in 2D (not measured)
 _POSE_BATCH = 4  # rotations searched at once by the branch and bound (speed; not measured)
 _POSE_ROUNDS = 2  # rigid rounds per point-set pose: after one a wrong pose can cost less
-_COMMON_ANGLE = 20.0  # degrees: poses this near the identity are the common frame (not measured)
+COMMON_ANGLE = 20.0  # degrees: poses this near the identity are the common frame (method.md §2)
 _SMALL_TURNS = (-10.0, 10.0)  # degrees, 2D common-frame poses besides the identity (not measured)
 _TURN_EVIDENCE = 7.5  # degrees: a turn below it is no turn (candidates 10 degrees apart)
 _COMMON_MARGIN = 2.0  # common frame / best total: shared hearts <= 1.51, turned hands >= 1.65
@@ -146,7 +146,7 @@ def _rotations(d: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
 # the fixed 2D turns of the pose search (made once: 25 us a match)
 _CIRCLE = _turns(2 * np.pi * np.arange(_ANGLES) / _ANGLES)
 _SMALL = _turns(np.radians(_SMALL_TURNS))
-_COMMON_COS = np.cos(np.radians(_COMMON_ANGLE))
+_COMMON_COS = np.cos(np.radians(COMMON_ANGLE))
 _CIRCLE.setflags(write=False)
 _SMALL.setflags(write=False)
 
@@ -154,7 +154,7 @@ _SMALL.setflags(write=False)
 def _pose_candidates(d: int, x: np.ndarray, y: np.ndarray, rotation: str
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rotations (r, d, d) tried by the pose search, a mask of those that keep the common
-    frame (within ``_COMMON_ANGLE`` of the identity) and the cosines of their angles.
+    frame (within ``COMMON_ANGLE`` of the identity) and the cosines of their angles.
     ``rotation="none"``: the identity alone; ``"free"``: :func:`_rotations`; ``"auto"``:
     both, with small turns about the identity in 2D."""
     eye = np.eye(d)[None]
@@ -340,7 +340,7 @@ def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray, modal: Similarity) 
     by the trimmed ICP again (the assignments of those rounds shift and shrink a pose
     when the target is sampled unevenly or lacks a part: cow, 500 points sampled
     unevenly, 0.35 -> 4.96 target spacings from the truth); with
-    ``rotation="auto"`` one within ``_COMMON_ANGLE`` of the identity wins instead unless
+    ``rotation="auto"`` one within ``COMMON_ANGLE`` of the identity wins instead unless
     its total exceeds ``_COMMON_MARGIN`` x the least (the common frame, as in 2D), the
     identity's start always among the second stage's (a sphere scores alike in every pose:
     it had lost there, and the pairs turned the sphere 169-171 degrees)."""
@@ -369,9 +369,9 @@ def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray, modal: Similarity) 
              if score <= _CLOSE * low]
     totals = [trusted_pairs(costs, sim.apply(costs.x), sub)[1] for sim in close]
     best = int(np.argmin(totals))
-    turned = p.rotation == "auto" and _turn(close[best]) > _COMMON_ANGLE
+    turned = p.rotation == "auto" and _turn(close[best]) > COMMON_ANGLE
     if p.rotation == "auto":  # the common frame, as in 2D: kept unless far costlier
-        near = [k for k, s in enumerate(close) if _turn(s) <= _COMMON_ANGLE]
+        near = [k for k, s in enumerate(close) if _turn(s) <= COMMON_ANGLE]
         if near and min(totals[k] for k in near) <= _COMMON_MARGIN * totals[best]:
             best, turned = min(near, key=totals.__getitem__), False
     sim = _trimmed_icp(x, y, close[best], trim, rotate)[1]

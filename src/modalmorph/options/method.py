@@ -47,7 +47,9 @@ class MatchOptions(Options):
         "pairs rejected", group="matching", kind="str", choices=METHODS)
     rotation: str = option(
         "auto", "auto: keep the common frame of the two inputs unless another pose fits "
-        "clearly better (shapes turned by more than ~20 degrees are found); none: the "
+        "clearly better, or better at all with a turn of more than 20 degrees (a turn "
+        "of 10-20 degrees between two different shapes is partly taken for deformation: "
+        "pass free); none: the "
         "inputs share one frame (frames of a sequence, ED/ES of one slice), never turn; "
         "free: any pose, by cost alone", group="matching", kind="str", choices=ROTATIONS)
     modes: int | None = option(
