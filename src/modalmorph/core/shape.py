@@ -13,6 +13,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import ShapeError
+from .nearest import nearest_distances
 
 __all__ = ["CURVE_DIMENSION", "CURVE_JUMP", "CURVE_STEP", "FPS_POOL", "FPS_TREE", "GRID_ROUNDS",
            "HUGE", "ImageFrame", "PASSED_KEPT", "Shape", "as_shape", "check_once", "check_pairs",
@@ -53,9 +54,6 @@ _BALL_MARGIN = 1.0 + 1e-9  # the ball's radius widened past rounding (relative)
 # Checks passed that are remembered (check_once): the objects of a few calls (match then
 # morph of one pair validate the same two; a pair's checks cost 0.3-0.5 ms at 70 nodes).
 PASSED_KEPT = 32
-# Shape.spacing by every pair's distance up to this many nodes, by a k-d tree above: one
-# thread, 70 nodes 65 -> 17 us, 128 nodes 100 -> 77, 200 nodes 147 -> 150 (the crossing)
-BRUTE_SPACING = 128
 _passed: dict = {}  # check_once's keys, the least recently used first
 _passed_lock = threading.Lock()
 
@@ -235,11 +233,7 @@ class Shape:
     @cached_property
     def spacing(self) -> float:
         """Mean nearest-neighbour distance in normalised units (see :attr:`normalized`)."""
-        x = self.normalized
-        if len(x) <= BRUTE_SPACING:
-            return float(_nearest_distances(x).mean())
-        dist, _ = cKDTree(x).query(x, k=2)
-        return float(dist[:, 1].mean())
+        return float(nearest_distances(self.normalized).mean())
 
     def to_user(self, normalized_points: np.ndarray) -> np.ndarray:
         """Map points from this shape's normalised frame back to the user's coordinates."""
@@ -316,22 +310,6 @@ def _contour_edges(start: int, stop: int, closed: bool) -> np.ndarray:
     if closed:
         j[-1] = start
     return np.c_[i, j]
-
-
-def _nearest_distances(x: np.ndarray) -> np.ndarray:
-    """Each point's distance to its nearest other point (m,), from every pair's squared
-    distance summed a component at a time: the k-d tree's numbers (``query(x, k=2)``'s
-    second column; bitwise on 830 contours and random 2D and 3D sets of 4-300 points)."""
-    m, d = x.shape
-    xt = x.T
-    diff = xt[0][None, :] - xt[0][:, None]
-    d2 = diff * diff
-    for a in range(1, d):
-        np.subtract(xt[a][None, :], xt[a][:, None], out=diff)
-        diff *= diff
-        d2 += diff
-    d2.flat[::m + 1] = np.inf  # not the point itself
-    return np.sqrt(d2.min(axis=1))
 
 
 def forget_checks() -> None:
