@@ -210,6 +210,20 @@ def test_bad_config_exits_2(hand_csvs, tmp_path, capsys):
     assert "unknown option 'stiffness'" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(("line", "said"), [
+    ('k = "abc"', "c.toml: k must be a number, got 'abc'"),
+    ("match_modes = 0", "c.toml: match_modes must be a positive integer, got 0")])
+def test_a_config_value_refused_names_the_file_and_the_option_as_written(
+        hand_csvs, tmp_path, capsys, line, said):
+    """Each refusal names the config file and the option by the name the user wrote
+    (review17: 'k must be a number' came without the file; 'modes must ...' for
+    match_modes, a name the user never wrote, beside the --modes option)."""
+    config = tmp_path / "c.toml"
+    config.write_text(line + "\n")
+    assert _run("morph", *hand_csvs, "--out", tmp_path / "o", "--config", config) == 2
+    assert said in capsys.readouterr().err
+
+
 def test_demo(tmp_path, capsys):
     out = tmp_path / "demo"
     assert _run("demo", "--out", out) == 0

@@ -127,6 +127,22 @@ def test_a_frame_said_wrongly_is_named(tmp_path, name, body):
         read_shape(tmp_path / name)
 
 
+def test_an_open_curve_in_a_point_file_is_said_and_read_open_when_told(tmp_path):
+    """A centreline in a CSV was closed by a chord across it without a word (review17):
+    it warns, naming --open-curves; open_curves=True reads it open; a closed outline
+    with a long straight edge (a glyph's vertices) does not warn."""
+    x = np.linspace(0.0, 60.0, 120)
+    stroke = _write_csv(tmp_path / "vessel.csv", np.c_[x, 0.003 * x**2])
+    with pytest.warns(UserWarning, match=r"vessel.csv: the contour is closed by an edge .* "
+                      r"times its median edge: .*open_curves=True"):
+        assert read_shape(stroke).closed
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert not read_shape(stroke, open_curves=True).closed
+        assert not read_shape(stroke, closed=False).closed
+        read_shape(_write_csv(tmp_path / "p.csv", _glyph_p()))
+
+
 def test_mixed_y_directions_warn_once_and_flip_y_mirrors(tmp_path):
     csv = _write_csv(tmp_path / "p.csv", _glyph_p())
     svg = _write_svg(tmp_path / "p.svg", _glyph_p())

@@ -603,6 +603,29 @@ def test_mesh_round_trip(tmp_path, ext):
     _same_surface(shape, points, faces, atol=1e-6)  # STL stores float32
 
 
+@pytest.mark.parametrize("ext", ["ply", "obj", "off"])
+def test_mesh_nodes_keep_the_files_vertex_order(tmp_path, ext):
+    """Node i is the file's vertex i (pairs.csv and per-step meshes index the user's
+    vertices; they came sorted by coordinate before, review17); a repeated vertex is
+    merged into its first appearance, the rest keep their order."""
+    import meshio
+
+    points, faces = _icosphere()
+    rng = np.random.default_rng(0)
+    shuffled = rng.permutation(len(points))  # an order no sort gives
+    points, faces = points[shuffled], np.argsort(shuffled)[faces]
+    path = tmp_path / f"sphere.{ext}"
+    meshio.write_points_cells(path, points, [("triangle", faces)])
+    shape = read_shape(path)
+    assert_allclose(shape.points, points, atol=1e-6)
+    assert np.array_equal(shape.faces, faces)
+    repeated = np.vstack([points, points[:1]])  # vertex 0 again, used by the last face
+    faces2 = np.vstack([faces[:-1], np.where(faces[-1] == 0, len(points), faces[-1])])
+    meshio.write_points_cells(path, repeated, [("triangle", faces2)])
+    again = read_shape(path)
+    assert_allclose(again.points, points, atol=1e-6) and np.array_equal(again.faces, faces)
+
+
 def test_mesh_quads_and_point_cloud(tmp_path):
     import meshio
 

@@ -160,6 +160,28 @@ def test_a_turn_beyond_the_common_frame_is_found(ch, degrees):
     assert np.median(off) <= 1
 
 
+@pytest.mark.parametrize("m, n", [(20, 400), (30, 400), (60, 400), (40, 200)])
+def test_a_coarse_source_onto_a_fine_target_pairs_every_node(m, n):
+    """A circle of m nodes onto an ellipse of n: 20 -> 400 raised ('align needs at least 2
+    corresponding points'), 30 -> 400 kept 4 pairs (distances in the fine target's
+    spacing left every coarse node too far); now each node has its partner, in order."""
+    source, target = _circle(m, 10, 10), _circle(n, 14, 7)
+    pairs = mm.match(source, target).pairs
+    assert len(pairs) == m
+    step = np.diff(np.r_[pairs[:, 1], pairs[0, 1] + n]) % n  # partners round once, in order
+    assert step.sum() == n and np.all(step > 0) and step.max() <= 3 * n / m
+    mm.morph(source, target, matching=mm.match(source, target))
+
+
+def test_a_circle_onto_a_needle_is_matched():
+    """A circle onto an ellipse 1000 times longer than wide (100 nodes each): no pair lay
+    within reach of the target's spacing and match raised; the search now measures in the
+    misfit's units there."""
+    needle = _circle(100, 50, 0.05)
+    result = mm.morph(_circle(100, 10, 10), needle)
+    assert len(result.matching.pairs) > 2 and np.isfinite(result.distance)
+
+
 @pytest.mark.parametrize("factor", [1 / 1000, 1 / 3, 3.0, 1000.0])
 def test_any_size_ratio(factor):
     """A pure size change is not a deformation: with the similarity motions free it

@@ -67,10 +67,12 @@ from .atomic import (
 from .base import (
     DEFAULT_NODES,
     FLIPPED_FRAME,
+    OPEN_LOOKING,
     UNEVEN_SPACING,
     RawShape,
     Reader,
     extension,
+    looks_open,
     make_shape,
     uneven_nodes,
     y_down,
@@ -102,6 +104,7 @@ __all__ = [
     "MIN_HOLE_AREA",
     "MESH_FORMATS",
     "MIN_OBJECT_PIXELS",
+    "OPEN_LOOKING",
     "OUTPUT_MARKER",
     "OUTPUT_MARKERS",
     "READERS",
@@ -160,6 +163,8 @@ def read_shape(path, options: ReadOptions | None = None, *, closed: bool | None 
         then ``max(DEFAULT_NODES, m)``, logged), and :data:`DEFAULT_NODES` for images and
         SVG; not allowed for 3D shapes), ``flip_y`` (2D point files: mirror y into image
         coordinates, y down, as images and SVG: for inputs mixing the two),
+        ``open_curves`` (2D contours are open curves; a point file that does not say and
+        whose closing edge is over :data:`OPEN_LOOKING` times its median edge warns),
         ``threshold`` (images only: grey level separating the object from the
         background, in the image's own units, 0-255 for 8-bit images) and ``object``
         (images and SVG: which object or outline to take, ``"largest"`` (in images, not
@@ -168,7 +173,7 @@ def read_shape(path, options: ReadOptions | None = None, *, closed: bool | None 
         (in SVG, drawn); the choice is logged).
     closed : bool, optional
         Whether a contour closes on itself; overrides the file (an SVG path's ``Z``, a
-        JSON ``"closed"``). Defaults to closed.
+        JSON ``"closed"``) and ``open_curves``. Defaults to closed.
     **overrides
         Fields of ``options`` by name: ``read_shape(p, nodes=80, threshold=0.5)``.
 
@@ -193,11 +198,14 @@ def read_shape(path, options: ReadOptions | None = None, *, closed: bool | None 
     name = os.fspath(path)
     path = Path(path)
     raw = read_guarded(_reader(path, name, opts), path, name, opts)
+    said = closed is not None or raw.closed is not None or raw.faces is not None
     if closed is None:
-        closed = True if raw.closed is None else raw.closed
+        closed = not opts.open_curves and (True if raw.closed is None else raw.closed)
     pts, contours = raw.points, raw.contours
     if raw.drop_closing_repeat and raw.faces is None:
         pts, contours = _drop_repeats(pts, contours, name)
+    if closed and not said and raw.frame is None:  # a point file that does not say
+        looks_open(name, pts, contours)
     frame = raw.frame
     if opts.flip_y and frame is None and pts.ndim == 2 and pts.shape[1] == 2:
         pts, frame = pts * [1.0, -1.0], FLIPPED_FRAME  # y up -> image coordinates

@@ -16,8 +16,8 @@ from ..core.shape import ImageFrame, Shape, resample, resampled_counts
 from ..errors import InputFileError, ShapeError
 from ..options import ReadOptions
 
-__all__ = ["DEFAULT_NODES", "FLIPPED_FRAME", "RawShape", "Reader", "UNEVEN_SPACING",
-           "extension", "make_shape", "uneven_nodes", "y_down"]
+__all__ = ["DEFAULT_NODES", "FLIPPED_FRAME", "OPEN_LOOKING", "RawShape", "Reader",
+           "UNEVEN_SPACING", "extension", "looks_open", "make_shape", "uneven_nodes", "y_down"]
 
 _log = logging.getLogger(__name__)
 
@@ -28,6 +28,12 @@ DEFAULT_NODES = 200
 # have 1.4-3.0 (hand 3: 3.0); a glyph drawn with 4 vertices on a straight stem and many
 # on its curves has 10 or more, and its stem then holds too few nodes for its loads.
 UNEVEN_SPACING = 4.0
+# A contour from a point file that does not say whether it closes, whose closing edge (last
+# node back to the first) is its longest and more than this many times its median edge, is
+# said to look open. Closed outlines: at most 14.3 (the vertices of 288 glyphs of DejaVu
+# Sans and Serif, STIX and cmr10: cmr10 'E'), the shared hearts and hands 1.0-1.6; open
+# strokes of 50-80 nodes (a half circle, a sine) 31-63.
+OPEN_LOOKING = 20.0
 # The frame of a point file read with ``flip_y``: its y mirrored into image coordinates.
 FLIPPED_FRAME = ImageFrame(unit="input units (y mirrored)", y_down=True)
 
@@ -66,6 +72,23 @@ def uneven_nodes(name: str, pts: np.ndarray, closed: bool, contours=None) -> int
               "to %d nodes equally spaced by arc length (nodes=N for another count)",
               name, edges.max() / median, len(pts), nodes)
     return nodes
+
+
+def looks_open(name: str, pts: np.ndarray, contours=None) -> None:
+    """Warn where a 2D contour closed by default looks like an open curve
+    (:data:`OPEN_LOOKING`): its closing chord would cut across the shape."""
+    if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 3 or not np.isfinite(pts).all():
+        return
+    sizes = contours or (len(pts),)
+    for k, p in enumerate(np.split(pts, np.cumsum(sizes)[:-1])):
+        edges = _edge_lengths(p, True)
+        median = float(np.median(edges))
+        if len(p) > 2 and edges[-1] >= edges.max() and edges[-1] > OPEN_LOOKING * median > 0:
+            which = f"contour {k}" if len(sizes) > 1 else "the contour"
+            warnings.warn(f"{name}: {which} is closed by an edge from its last node back to "
+                          f"its first {edges[-1] / median:.0f} times its median edge: if it "
+                          "is an open curve (a centreline, a stroke), say so (open_curves=True)",
+                          UserWarning, stacklevel=3)
 
 
 def _edge_lengths(pts: np.ndarray, closed: bool) -> np.ndarray:

@@ -107,15 +107,18 @@ def _triangles(mesh) -> list:
 
 
 def _surface(points: np.ndarray, faces: np.ndarray, name: str):
-    """(points, faces) of a surface: unreferenced points, repeated points and degenerate
-    triangles dropped."""
+    """(points, faces) of a surface: unreferenced points, repeated points (all but the
+    first) and degenerate triangles dropped, the points left in the file's order."""
     if faces.min() < 0 or faces.max() >= len(points):
         raise InputFileError(f"{name}: triangles refer to points outside "
                              f"0..{len(points) - 1}")
     used = np.unique(faces)
     points, faces = points[used], np.searchsorted(used, faces)  # drop unreferenced points
-    points, inverse = np.unique(points, axis=0, return_inverse=True)  # merge repeated points
-    faces = inverse.reshape(-1)[faces]
+    _, first, inverse = np.unique(points, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)  # the merged points in the order they first appear
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    points, faces = points[first[order]], rank[inverse.reshape(-1)][faces]
     degenerate = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (
         faces[:, 0] == faces[:, 2])
     faces = faces[~degenerate]

@@ -74,7 +74,7 @@ from .features import (
 )
 from .mirror import MIRROR, MIRROR_EXACT, MIRROR_SUSPECT, mirror_ratio
 from .pose import cloud_pose, contour_pose, surface_gap
-from .search import Costs, final_pairs, mutual_best, plausible
+from .search import Costs, final_pairs, mutual_best, plausible, widened
 
 __all__ = ["Matching", "match", "modal_features", "affinity", "DEFAULT_MODES",
            "FEATURE_SIGMA", "METHODS", "ROTATIONS", "MIRROR", "MIRROR_EXACT", "MIRROR_SUSPECT"]
@@ -162,15 +162,14 @@ CHOICE_NODES = 10_000
 POSE_DECAY = 0.02
 # refine (_refined) starts from the coarse landing only where, after its first level, that
 # lies nearer the target's surface than this x the rigid pose's (coherent.rigid_pose: the
-# modal match's similarity laid on the target by rigid CPD) does: on two samplings of one
-# surface (match3d --variants resampled) the two lie as near (ratio 0.985-1.14 at 2000 and
-# 10 000 points) and the coarse deformation holds a turn (blob 2000 at 180 deg: 7 deg from
-# the truth's similarity, rigid CPD 4.6 deg); where the coarse match's deformation is real
-# (the twisted ellipsoid, warps of 25 %, a cap cut away at 30 deg, on base) it mostly lies
-# nearer by 0.65-0.94. Only up to CHOICE_NODES; above, the nearer of the two is taken (at
-# 100 000 points, subsets and POSE_DECAY, the 0.95 rule took blob resampled 0 deg 1.77 ->
-# 1.63 spacings but 180 deg 2.06 -> 2.81; the nearer: 30 deg 2.12 -> 1.79, 90 deg 1.85 ->
-# 1.88, 0 and 180 deg unchanged, 50 000 points at 180 deg 3.41 -> 3.15; base within 0.01).
+# modal match's similarity laid on the target by rigid CPD): on two samplings of one surface
+# (match3d --variants resampled) they lie as near (0.985-1.14 at 2000 and 10 000 points) and
+# the coarse deformation holds a turn (blob 2000 at 180 deg: 7 deg off the truth, rigid CPD
+# 4.6); where the coarse deformation is real (twisted ellipsoid, warps of 25 %, a cap cut
+# at 30 deg, on base) it lies nearer by 0.65-0.94. Above CHOICE_NODES the nearer is taken
+# (100 000 points: the 0.95 rule took blob resampled 0 deg 1.77 -> 1.63 spacings, 180 deg
+# 2.06 -> 2.81; the nearer 30 deg 2.12 -> 1.79, 90 deg 1.85 -> 1.88, 0 and 180 unchanged,
+# 50 000 points at 180 deg 3.41 -> 3.15; base within 0.01).
 _START_GAIN = 0.95
 _REJECT = 16.0  # pairs costing more are dropped: 4 target spacings (not measured)
 
@@ -268,9 +267,8 @@ class Matching:
 
 def _match_auto(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions,
                 p: Problem | None = None) -> tuple[np.ndarray, np.ndarray, Similarity, np.ndarray]:
-    """The default matcher (on ``p``, :func:`prepare`'s problem, when given); also returns
-    where the fitted similarity and deformation take every source node (the target's user
-    coordinates), shape (m, d)."""
+    """The default matcher (on ``p``, :func:`prepare`'s problem, when given); also where
+    the fit takes every source node (m, d), in the target's user coordinates."""
     p = prepare(src, tgt, n_modes, opts.sigma, opts.rotation) if p is None else p
     sub = spread_indices(src, ALTERNATION_NODES)
     costs = Costs(src.normalized, tgt.normalized, p.F, tgt.spacing**2, p.ordered, p.closed)
@@ -278,14 +276,18 @@ def _match_auto(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions,
     order = np.arange(tgt.m)[::-1] if pose.reverse else np.arange(tgt.m)
     if pose.reverse:  # the target in search order (np.take: C order, rows read whole)
         costs = replace(costs, y=costs.y[order], F=np.take(costs.F, order, axis=1))
-    fit, final = fits(p, pose, costs, sub)
-    placed = alternate(fit, pose.sim, pose.rotate)
-    if p.rotation == "auto" and pose.common:
-        placed = keep_or_turn(fit, final, placed, pose.turned)
-    if src.dim == 3 and not p.ordered:
-        placed = _nearer_surface(placed, pose.sim, costs, tgt.spacing)
-    z, found = settle(fit, final, placed, p.ordered)
-    pairs, cost = final_pairs(final, z, found, _REJECT if opts.reject is None else opts.reject)
+    for wide in (False, True):  # again, in units of the misfit, if none is near (a needle)
+        costs = widened(costs, pose.sim) if wide else costs
+        fit, final = fits(p, pose, costs, sub)
+        placed = alternate(fit, pose.sim, pose.rotate)
+        if p.rotation == "auto" and pose.common:
+            placed = keep_or_turn(fit, final, placed, pose.turned)
+        if src.dim == 3 and not p.ordered:
+            placed = _nearer_surface(placed, pose.sim, costs, tgt.spacing)
+        z, found = settle(fit, final, placed, p.ordered)
+        pairs, cost = final_pairs(final, z, found, _REJECT if opts.reject is None else opts.reject)
+        if len(pairs) > src.dim:
+            break
     pairs[:, 1] = order[pairs[:, 1]]  # in the target's own order (np.c_'s 17 us spared)
     landed = tgt.to_user(z)
     return pairs, cost, align(src.points[pairs[:, 0]], tgt.points[pairs[:, 1]]), landed
@@ -313,11 +315,9 @@ def _match_one(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
 
 def _nearer_surface(placed: Placement, sim: Similarity, costs: Costs, spacing: float
                     ) -> Placement:
-    """The alternation's placement of a 3D point set, or the pose ``sim`` alone when
-    that lies nearer the target's surface (:func:`~modalmorph.matching.pose.surface_gap`,
-    distances capped at ``_GAP_TRIM`` target spacings): the alternation's one-to-one
-    assignments drag the source towards where a target sampled unevenly is dense, or
-    over a part that the target lacks."""
+    """The alternation's placement of a 3D point set, or the pose ``sim`` alone where that
+    lies nearer the target's surface (``surface_gap``, capped at ``_GAP_TRIM`` spacings):
+    assignments drag the source to where a target is dense, or over a part it lacks."""
     posed = sim.apply(costs.x)
     gap = partial(surface_gap, y=costs.y, trim=_GAP_TRIM * spacing, tree=cKDTree(costs.y))
     return Placement(sim, posed) if gap(posed) < gap(placed.z) else placed

@@ -27,6 +27,10 @@ _RIGID = 3  # rigid rounds first; with the next and _TANGENTIAL: precision 0.931
 _DEFORM_ROUNDS = 8  # rounds with the deformation (measured together with _RIGID)
 _STIFF = 1e-3  # weight of the modal strain energy in the deformation fit (not measured)
 _TANGENTIAL = 0.3  # weight of the along-contour residual (measured together with _RIGID)
+# A source node lies up to about half its own spacing off a finer target's curve after a
+# smooth fit: a coarser source's distances are measured in this share of its spacing (20-,
+# 30- and 60-node circles onto a 400-node ellipse kept 4, 4 and 8 pairs in target spacings)
+_COARSE_REACH = 0.5
 _TURN_GAIN = 0.5  # a turn must lower the objective below this: hearts >= 0.67, hands 0.37
 
 
@@ -96,6 +100,8 @@ def fits(p: Problem, pose: Pose, costs: Costs, sub: np.ndarray) -> tuple[Fit, Co
     unless the source (or the alternation's subset ``sub``) is denser than the target."""
     s, h = pose.sim.scale, _DENSE * p.tgt.spacing
     denser = p.src.spacing * s < h
+    # distances in half the source's spacing where that is the larger (a coarse source)
+    costs = replace(costs, h2=max(costs.h2, (_COARSE_REACH * p.src.spacing * s) ** 2))
     final = replace(costs, repeat=REPEAT if denser else np.inf, many=denser)
     sub_denser = p.src.spacing * p.src.m / len(sub) * s < h
     metric = None
@@ -127,7 +133,7 @@ def alternate(fit: Fit, sim: Similarity, rotate: bool) -> Placement:
     good = previous = None
     for _ in range(_RIGID):
         good, _ = trusted_pairs(fit.costs, sim.apply(x), fit.sub)
-        if previous is not None and np.array_equal(good, previous):
+        if previous is not None and np.array_equal(good, previous) or len(good) <= x.shape[1]:
             break
         previous, good = good, None
         sim = align(x[previous[:, 0]], y[previous[:, 1]], rotate=rotate)
@@ -135,8 +141,8 @@ def alternate(fit: Fit, sim: Similarity, rotate: bool) -> Placement:
     for r in range(_DEFORM_ROUNDS):
         if good is None:
             good, _ = trusted_pairs(fit.costs, sim.apply(x) + shift, fit.sub)
-        if r and np.array_equal(good, previous):
-            break
+        if r and np.array_equal(good, previous) or len(good) <= x.shape[1]:
+            break  # a fixed point, or too few pairs near to fit (a pose off the target)
         previous, good = good, None
         sim = align(x[previous[:, 0]], y[previous[:, 1]], rotate=rotate)
         shift = _deformation(fit, sim, previous)

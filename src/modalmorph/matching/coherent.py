@@ -97,6 +97,8 @@ def drift(fit: Fit, placed: Placement, pairs: np.ndarray) -> np.ndarray:
         # E-step: each target node shares one unit of weight among the bands that hold it
         P = shared_weights(np.exp(-D / (2 * sigma2)), valid, band, len(y))
         p1 = P.sum(axis=1)
+        if not p1.any():  # every band out of reach (shapes far apart): no field to fit
+            break
         # M-step: the field's coefficients (CPD's W, in the Nystrom features)
         target = np.einsum("kb,kbd->kd", P, yb) - p1[:, None] * zs
         a = np.linalg.solve(f.T @ (p1[:, None] * f) + _COHERENT_LAMBDA * sigma2 * eye,

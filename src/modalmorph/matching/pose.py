@@ -249,6 +249,8 @@ def contour_pose(p: Problem) -> Pose:
                 *(p.src.normalized[ci] @ rots[k].T for k in (rn, r)), p.tgt.normalized[cj]):
             Cb, reverse, common, rotate = Cn, rev_near, evidence[r], False
     jj, _ = ordered_pairs(Cb, p.closed, SKIP, repeat)
+    if np.count_nonzero(jj >= 0) <= p.src.dim:  # none near (a circle onto a needle): all
+        jj, _ = ordered_pairs(Cb, p.closed, np.inf, repeat)  # in order, none left out
     keep = jj >= 0
     if reverse:
         jj = len(cj) - 1 - jj

@@ -103,12 +103,19 @@ def split(values: dict, classes=OPTION_CLASSES, *, where: str = "options") -> di
     if unknown:
         raise OptionError(f"{where}: unknown option {unknown[0]!r}; known: "
                           f"{', '.join(table)}")
-    kwargs = {cls: {} for cls in classes}
-    for flat, value in values.items():
-        cls, f = table[flat]
-        kwargs[cls][f.name] = parse_value(flat, f.metadata["kind"], value)
+    kwargs, out = {cls: {} for cls in classes}, {}
     try:
-        return {cls: cls(**kw) for cls, kw in kwargs.items()}
+        for flat, value in values.items():
+            cls, f = table[flat]
+            kwargs[cls][f.name] = parse_value(flat, f.metadata["kind"], value)
+        for cls, kw in kwargs.items():
+            try:
+                out[cls] = cls(**kw)
+            except OptionError as exc:  # named as the user names it: match_modes, not modes
+                own = {f.name: flat for flat, (c, f) in table.items() if c is cls}
+                field, _, rest = str(exc).partition(" ")
+                raise OptionError(f"{own.get(field, field)} {rest}") from None
     except OptionError as exc:
         raise OptionError(f"{where}: {exc}") from None
+    return out
 

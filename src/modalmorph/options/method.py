@@ -220,6 +220,10 @@ class ReadOptions(Options):
         None, "label images (segmentations, NIfTI): the value of the object's pixels",
         group="input", kind="int")
 
+    open_curves: bool = option(
+        False, "the contours of 2D files are open curves (a centreline, a pen stroke), "
+        "not closed outlines (the default; an SVG path without Z and a JSON or NPZ "
+        "'closed' say it themselves)", group="input", kind="bool")
     flip_y: bool = option(
         False, "mirror the y of 2D point files (CSV, TSV, TXT, NPY, NPZ, JSON: y up) into "
         "image coordinates (y down, as images and SVG), for inputs mixing the two; the "
