@@ -1,7 +1,9 @@
 """Strain of the myocardium on phantoms with analytic motion, and on the shared hearts.
 
 For each phantom (:func:`modalmorph.phantoms.ring_phantom`: 30 frames of 128 x 128, LV 60
-px across, an incompressible wall contracting 30 % of its endocardial radius) the table
+px across, an incompressible wall contracting 30 % of its endocardial radius; circular,
+twisting, with an akinetic or hypokinetic sector, elliptical of aspect 1.15 and 1.3, and
+circular in pixels of 1.5 x 0.8 mm, read from a NIfTI file: an ellipse in mm) the table
 gives, per segment (0 = global), the truth at end-systole (the strain definitions applied
 to the exact material motion), modalmorph's (:func:`modalmorph.strain`) and the baseline's
 (nearest-point tracking: each node moves to the nearest point of the next frame's
@@ -11,12 +13,18 @@ leaves: the floor), of one ring track, and of the strain with nearest pairs (bef
 correspondence). Then the time of one 30-frame sequence, and the endocardial
 circumferential strain ED -> ES of the shared hearts (``--endo-only``).
 
-Run: ``OMP_NUM_THREADS=1 PYTHONPATH=src python benchmarks/strain.py [--noise 0.2]``
+``--modes``: every correspondence on every phantom (plain normals as before 2026-11-25,
+normals of the wall made round: the default), worst errors and times. ``--frames``: the
+error of the peaks with and without the smoothing over time, by frame count.
+
+Run: ``OMP_NUM_THREADS=1 PYTHONPATH=src python benchmarks/strain.py [--noise 0.2]
+[--modes] [--frames]``
 """
 
 from __future__ import annotations
 
 import argparse
+import tempfile
 import time
 from pathlib import Path
 
@@ -24,7 +32,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 from scipy.spatial import cKDTree
 
-from modalmorph import Shape, TrackOptions, track
+from modalmorph import Shape, TrackOptions, cardiac, track
 from modalmorph.cardiac import (
     DENSE,
     MORPH_TOL,
@@ -44,23 +52,48 @@ PHANTOMS = {
     "twist 10 deg": dict(twist=10.0),
     "akinetic 60-120": dict(sector=(60.0, 120.0, 0.0)),
     "hypokinetic 180-240": dict(sector=(180.0, 240.0, 0.5)),
+    "ellipse 1.15": dict(aspect=1.15),
+    "ellipse 1.3": dict(aspect=1.3),
+    "pixels 1.5 x 0.8 mm": dict(spacing=(1.5, 0.8)),  # a circle in pixels
 }
+MODES = ("nearest", "plain normal", "normal", "modal")
+FRAME_COUNTS = (8, 10, 12, 14, 16, 20, 24, 30, 40)
 TRUTH_NODES = (720, 4000)  # endocardial chords, epicardial nodes of the exact motion
 HEARTS = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "heart"
 
 
-def truth(ph) -> dict:
+def phantom(name: str, noise: float, frames: int = FRAMES, folder: str | None = None):
+    """``(phantom, spacing, input)``: the named phantom, its pixel size, and what strain()
+    reads (the masks, or a NIfTI file of them in ``folder`` for another pixel size)."""
+    kw = dict(PHANTOMS[name])
+    spacing = kw.pop("spacing", (1.0, 1.0))
+    ph = ring_phantom(frames, noise=noise, **kw)
+    if spacing == (1.0, 1.0):
+        return ph, spacing, ph.masks
+    import nibabel
+
+    path = str(Path(folder or tempfile.mkdtemp()) / f"{name.split()[0]}.nii.gz")
+    data = np.transpose(ph.masks, (2, 1, 0))[:, :, None, :].astype(np.int16)
+    image = nibabel.Nifti1Image(data, np.diag([*spacing, 8.0, 1.0]))
+    image.header.set_xyzt_units("mm", "sec")
+    nibabel.save(image, path)
+    return ph, spacing, path
+
+
+def truth(ph, spacing=(1.0, 1.0)) -> dict:
     """The strain definitions applied to the exact material motion."""
     f = range(len(ph.masks))
-    return wall_strain(*[np.array([ph.move(c, i) for i in f]) for c in _circles(ph)])
+    return wall_strain(*[np.array([ph.move(c, i) for i in f]) * spacing
+                         for c in _circles(ph)])
 
 
-def floor(ph) -> dict:
+def floor(ph, spacing=(1.0, 1.0)) -> dict:
     """The same of an exact tracking of the noisy boundaries (the material points of the
     truth moved off by the boundary noise along their ray), smoothed over time as
     strain() does: the error the segmentation noise (and the smoothing) alone leave."""
     f = range(len(ph.masks))
-    walls = [np.array([ph.segmented(c, i, k) for i in f]) for k, c in enumerate(_circles(ph))]
+    walls = [np.array([ph.segmented(c, i, k) for i in f]) * spacing
+             for k, c in enumerate(_circles(ph))]
     sigma = StrainOptions().smooth_frames
     if sigma and len(ph.masks) >= SMOOTH_MIN_FRAMES:
         walls = [gaussian_filter1d(w, sigma, axis=0, mode="nearest") for w in walls]
@@ -69,16 +102,13 @@ def floor(ph) -> dict:
 
 def _circles(ph):
     """Dense material points of the endocardium and epicardium at the reference."""
-    def circle(radius, n):
-        th = np.linspace(0, 2 * np.pi, n, endpoint=False)
-        return ph.centre + radius * np.c_[np.cos(th), -np.sin(th)]
-    return circle(ph.inner, TRUTH_NODES[0]), circle(ph.outer, TRUTH_NODES[1])
+    return ph.wall(ph.inner, TRUTH_NODES[0]), ph.wall(ph.outer, TRUTH_NODES[1])
 
 
-def baseline(ph, nodes: int) -> dict:
+def baseline(ph, nodes: int, spacing=(1.0, 1.0)) -> dict:
     """Nearest-point tracking: frame to frame, each node to the nearest point of the next
     frame's contour (resampled densely), then the same definitions."""
-    rings = [mask_ring(m, f"frame {i}") for i, m in enumerate(ph.masks)]
+    rings = [mask_ring(m, f"frame {i}", spacing=spacing) for i, m in enumerate(ph.masks)]
     tracked = []
     for k in range(2):
         p = resample(rings[0][k], nodes)
@@ -91,11 +121,11 @@ def baseline(ph, nodes: int) -> dict:
     return wall_strain(*tracked)
 
 
-def ring_track(ph, nodes: int) -> dict:
+def ring_track(ph, nodes: int, spacing=(1.0, 1.0)) -> dict:
     """The alternative to strain()'s contour-by-contour tracking: one track of the ring
     (one FE model over both contours, each matched with its partner), same inputs and
-    options (without the smoothing over time)."""
-    rings = [mask_ring(m, f"frame {i}") for i, m in enumerate(ph.masks)]
+    options (without the smoothing over time, nor the rounding)."""
+    rings = [mask_ring(m, f"frame {i}", spacing=spacing) for i, m in enumerate(ph.masks)]
     shapes = []
     for f, (endo, epi) in enumerate(rings):
         n = nodes if f == 0 else DENSE * nodes
@@ -112,11 +142,13 @@ def table(noise: float) -> None:
           f"end-systole (frame {ES}), errors = largest over all frames (points)")
     print(f"{'phantom':<20} {'kind':<6} {'seg':>3} {'truth':>7} {'mm':>7} {'base':>7} "
           f"{'err mm':>7} {'err base':>8}")
+    folder = tempfile.mkdtemp()
     for name, kw in PHANTOMS.items():
-        ph = ring_phantom(FRAMES, noise=noise, **kw)
-        tr, base, best = truth(ph), baseline(ph, StrainOptions().nodes), floor(ph)
-        got, ring = strain(ph.masks), ring_track(ph, StrainOptions().nodes)
-        before = strain(ph.masks, correspondence="nearest", smooth_frames=0.0,
+        ph, spacing, frames = phantom(name, noise, folder=folder)
+        nodes = StrainOptions().nodes
+        tr, base, best = truth(ph, spacing), baseline(ph, nodes, spacing), floor(ph, spacing)
+        got, ring = strain(frames), ring_track(ph, nodes, spacing)
+        before = strain(frames, correspondence="nearest", smooth_frames=0.0,
                         morph_options={})  # the correspondence of track (until 2026-11)
         for kind in ("radial", "circumferential"):
             t, m, b = tr[kind], getattr(got, kind), base[kind]
@@ -141,6 +173,51 @@ def table(noise: float) -> None:
             truest = 1 + int(np.argmin(np.abs(tr["circumferential"][ES, 1:])))
             print(f"{'':<20} weakest segment by peak circumferential strain: {weakest} "
                   f"(truth {truest})")
+
+
+def modes(noise: float) -> None:
+    """Every correspondence on every phantom: worst errors over the frames (points)."""
+    print(f"correspondences, boundary noise {noise} px: largest error over all frames "
+          f"(points), global / worst segment; time of the sequence")
+    print(f"{'phantom':<20} {'correspondence':<14} {'circumferential':>16} "
+          f"{'radial':>14} {'endocardial':>14} {'time s':>7}")
+    folder = tempfile.mkdtemp()
+    for name in PHANTOMS:
+        ph, spacing, frames = phantom(name, noise, folder=folder)
+        tr = truth(ph, spacing)
+        for mode in MODES:
+            cardiac.ROUNDING = mode != "plain normal"
+            start = time.perf_counter()
+            got = strain(frames, correspondence=mode.split()[-1])
+            seconds = time.perf_counter() - start
+            cardiac.ROUNDING = True
+            cells = []
+            for kind in ("circumferential", "radial", "circumferential_endo"):
+                e = np.abs(getattr(got, kind) - tr[kind]).max(axis=0)
+                cells.append(f"{e[0]:6.2f} / {e[1:].max():5.2f}")
+            print(f"{name:<20} {mode:<14} {cells[0]:>16} {cells[1]:>14} {cells[2]:>14} "
+                  f"{seconds:7.2f}")
+
+
+def frame_counts(noise: float) -> None:
+    """Error of the global peaks, smoothed (sigma 1 frame) or not, by frame count."""
+    print(f"\nsmoothing over time by frame count (contracting phantom, noise {noise} px): "
+          f"error of the global peak (points) and worst segment error over all frames")
+    print(f"{'frames':>6} {'smoothing':>9} {'radial peak':>11} {'worst seg':>9} "
+          f"{'circ peak':>9} {'worst seg':>9}")
+    for count in FRAME_COUNTS:
+        ph = ring_phantom(count, noise=noise, seed=1)
+        tr = truth(ph)
+        for sigma in (0.0, 1.0):
+            cardiac.SMOOTH_MIN_FRAMES = 2  # every count, to measure
+            got = strain(ph.masks, smooth_frames=sigma)
+            cardiac.SMOOTH_MIN_FRAMES = SMOOTH_MIN_FRAMES
+            cells = []
+            for kind in ("radial", "circumferential"):
+                t = tr[kind]
+                peak = got.peak(kind)[0][0] - t[np.abs(t[:, 0]).argmax(), 0]
+                cells.append(f"{peak:+11.2f} {np.abs(getattr(got, kind) - t)[:, 1:].max():9.2f}")
+            print(f"{count:>6} {sigma:>9g} {cells[0]} {cells[1]}")
 
 
 def timing() -> None:
@@ -202,9 +279,21 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--noise", type=float, nargs="+", default=[0.0, 0.2],
                         help="boundary noise of the phantoms, px")
+    parser.add_argument("--modes", action="store_true",
+                        help="only the correspondences' table (every phantom)")
+    parser.add_argument("--frames", action="store_true",
+                        help="only the smoothing's table by frame count")
     args = parser.parse_args()
-    for level in args.noise:
-        table(level)
-        print()
-    timing()
-    hearts()
+    if args.modes or args.frames:
+        for level in args.noise:
+            if args.modes:
+                modes(level)
+            if args.frames:
+                frame_counts(level)
+            print()
+    else:
+        for level in args.noise:
+            table(level)
+            print()
+        timing()
+        hearts()

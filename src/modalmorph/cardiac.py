@@ -1,40 +1,25 @@
 """``strain()``: radial and circumferential strain of the myocardium from segmented frames.
 
 A short-axis slice of the left-ventricle wall is a ring: the endocardium (the hole) inside
-the epicardium (the outer boundary). Both are tracked through the frames (:func:`track`),
-so every node is a material point of the wall (a contour shows no motion along itself:
-each reference node moves along the reference contour's normal, ``correspondence=
-"normal"``; the trajectories are smoothed over time, ``smooth_frames``), and the strains
-are Lagrangian, against the reference frame ``r`` (end-diastole, frame 0 by default), in
-percent:
+the epicardium (the outer boundary). Both are tracked through the frames (:func:`track`;
+``correspondence``, ``smooth_frames``: :data:`DEFINITIONS`), so every node is a material
+point of the wall, and the strains are Lagrangian, against the reference frame ``r``
+(end-diastole, frame 0 by default), in percent:
 
-- **radial**: at every endocardial node, the wall thickness ``T`` along the endocardium's
-  local normal at the reference frame, from the endocardial node to the epicardial material
-  point where the normal ray meets the epicardium (a fixed place between two epicardial
-  nodes, carried through the frames by them); ``radial = sum T_f / sum T_r - 1`` over the
-  chords of a segment (its mean thickening);
-- **circumferential**: length change of the midwall (the polyline through the chords'
-  midpoints), ``L_f / L_r - 1`` over the midwall stretches of a segment; the same of the
-  endocardium (``circumferential_endo``) and of the epicardium (``circumferential_epi``);
-- **segments**: ``N`` equal sectors by angle around the reference centre (the centroid of
-  the area inside the endocardium at the reference frame), segment 1 starting at the
-  reference angle and the others following counterclockwise as the image is shown (x to
-  the right, y down); every chord and stretch belongs to the sector of its midpoint at the
-  reference frame and keeps it (Lagrangian); segment 0 is the whole wall;
-- **strain rate**: the time derivative of each strain (central differences), per frame or
-  per second given the frame interval; **peaks**: the value of largest magnitude and its
-  frame.
-
-(The module is ``cardiac``, not ``strain``: a submodule named like the function would
-replace ``modalmorph.strain`` by itself once imported.)
+- **radial**, wall thickening along the endocardium's normals at the reference frame;
+- **circumferential**, the length change of the midwall (of the endocardium, the
+  epicardium: ``circumferential_endo``, ``circumferential_epi``);
+- by **segments**, equal sectors around the reference endocardium's centroid that the
+  material points keep; their **strain rate** and **peaks** (:data:`DEFINITIONS`, also
+  written into ``strain.json``).
 
 With ``endo_only=True`` (the blood pool, or endocardial contours) only the endocardial
-circumferential strain is measured; the other columns are NaN.
+circumferential strain is measured; the other columns are NaN. (The module is ``cardiac``:
+a submodule named ``strain`` would replace the function ``modalmorph.strain``.)
 """
 
 from __future__ import annotations
 
-import logging
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -48,10 +33,8 @@ from .io.images import MIN_OBJECT_PIXELS, choose_objects
 from .options import MatchOptions, MorphOptions, StrainOptions, TrackOptions
 from .tracking import track
 
-__all__ = ["Strain", "KINDS", "strain", "wall_strain", "mask_ring",
+__all__ = ["Strain", "KINDS", "strain", "wall_strain", "mask_ring", "rounding_stretch",
            "DEFINITIONS"]
-
-log = logging.getLogger(__name__)
 
 KINDS = ("radial", "circumferential", "circumferential_endo", "circumferential_epi")
 DEFINITIONS = {
@@ -72,8 +55,9 @@ DEFINITIONS = {
     "tracking": "every frame reached from the first frame by a morph; by default "
                 "(correspondence normal) each node paired with the point where the "
                 "contour's normal meets the frame's contour, as a contour shows no motion "
-                "along itself; the node paths smoothed over time (smooth_frames, cines of "
-                "10 frames or more)",
+                "along itself (made round first: on an elliptical wall, its rays from the "
+                "centre); the node paths smoothed over time (smooth_frames, cines of 24 "
+                "frames or more)",
 }
 CONTOUR_FILES = (".csv", ".tsv", ".txt", ".json", ".svg")  # read as contours, not masks
 # A hole smaller than a 3 x 3 block is a speck, not a ventricle: io's measured
@@ -96,24 +80,32 @@ TRACK_REFERENCE = "first"
 # goes to where the reference contour's normal meets the frame's contour. A contour shows
 # no motion along itself, and "nearest" pairs slide towards a sector that moves less (up
 # to 10.5 degrees in the akinetic phantom): worst segment circumferential error on the
-# noiseless phantoms 1.6/8.3/4.0 -> 0.5/1.2/0.5 points (contract/akinetic/hypokinetic);
-# with the smoothing below 0.6/0.8/0.6, and with 0.2 px boundary noise 1.3/1.7/0.9 (nearest
-# pairs: 2.5/8.9/4.2; benchmarks/strain.py). The phantoms' reference walls are circles,
-# whose normals are their radii: they cannot tell this rule from a radial motion.
+# noiseless phantoms 1.6/8.3/4.0 -> 0.5/1.2/0.5 points (contract/akinetic/hypokinetic;
+# 0.2 px boundary noise, smoothed: 1.3/1.7/0.9, nearest pairs 2.5/8.9/4.2). But a shrinking
+# ellipse moves its points along its rays, and plain normals slid them to its long axis
+# (review17: segments 2 and 5 of aspect 1.3 at -12 % against -17 %, -7 against -18 with
+# 1.5 x 0.8 mm pixels): the walls are tracked made round (rounding_stretch), where those
+# rays are the normals; worst segment error on the ellipses 1.15/1.3/1.5 x 0.8 mm pixels
+# 3.6/6.4/12.9 -> 0.4/0.4/0.7, circular phantoms unchanged (benchmarks/strain.py --modes;
+# False: plain normals, for that comparison).
+ROUNDING = True
 # The morph's stop tolerance (MorphOptions.tol, a fraction of the RMS radius) for the
 # strain: the default 0.005 leaves the nodes up to 0.09 px short of their partners, 0.9
 # points of radial strain on a 10 px wall (global radial error 1.42 -> 0.71 on the
 # contracting phantom with 0.001; same time, 0.6 s for 30 frames).
 MORPH_TOL = 0.001
 # StrainOptions.smooth_frames (a Gaussian over time, sigma in frames, on every frame and
-# the reference too: its segmentation error would otherwise bias every strain) applies to
-# sequences of at least this many frames: a cine sampling the cycle, not a pair ED -> ES
-# (there it would pull the last frame towards the reference). On the noiseless phantoms
-# sigma = 1 frame takes the worst segment radial error 2.0/1.8/2.6 -> 1.2/1.0/1.6 points
-# (contract/akinetic/hypokinetic; pixelation jitter from frame to frame), with 0.2 px
-# boundary noise 8.6/8.7/7.7 -> 4.2/6.0/4.1; sigma 0.7 removes less (5.0/6.5/4.8), 1.5
-# and 2 bias the peaks (noiseless global circumferential error 0.2 -> 0.6 -> 1.1).
-SMOOTH_MIN_FRAMES = 10
+# the reference too) applies to cines of at least this many frames. Sigma 1 frame takes
+# the phantoms' worst segment radial error 2.0/1.8/2.6 -> 1.2/1.0/1.6 points, with 0.2 px
+# boundary noise 8.6/8.7/7.7 -> 4.2/6.0/4.1 (sigma 0.7: 5.0/6.5/4.8), but flattens the
+# peaks of a short cine: global peak radial / circumferential error -2.5/+1.9 points at
+# 12 frames (review17), -0.7/+0.7 at 20, -0.4/+0.4 at 24, -0.1/+0.2 at 30 (unsmoothed
+# +0.3/0.0; benchmarks/strain.py --frames, docs/guide/strain.md).
+SMOOTH_MIN_FRAMES = 24
+# An RV insertion point nearer the ventricle's centre than this fraction of the reference
+# endocardium's mean radius gives no direction (a click on the centre): refused. The
+# insertion points lie on the epicardium, beyond 1.
+RV_MIN_DISTANCE = 0.5
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -139,7 +131,9 @@ class Strain:
         Reference frame; start of segment 1 (degrees).
     names : tuple of str
     tracks : tuple of Track
-        The tracking of the endocardium and of the epicardium.
+        The tracking of the endocardium and of the epicardium; with ``correspondence=
+        "normal"`` of the walls made round: their points times
+        ``params["rounding"]`` (transposed) are the walls' (:func:`rounding_stretch`).
     masks : ndarray or None, shape (F, H, W)
         The masks the contours came from (None for contour inputs).
     spacing : tuple of float
@@ -257,24 +251,46 @@ def strain(frames, *, options: StrainOptions | None = None,
         correspondence=opts.correspondence)
     kw = dict(options=topts, names=names, match_options=match_options,
               morph_options=_morph_options(morph_options))
-    tracks = [track(_observed([ring[k] for ring in rings], opts.nodes), **kw)
-              for k in range(1 if opts.endo_only else 2)]
-    endo = _smoothed(tracks[0].points, opts)
-    epi = _smoothed(tracks[1].points, opts) if len(tracks) > 1 else \
+    rounding = rounding_stretch(rings[0][0]) if opts.correspondence == "normal" and \
+        ROUNDING else np.eye(2)  # tracked made round, measured as they are
+    tracks = [track(_observed([r[k] @ np.linalg.inv(rounding).T for r in rings], opts.nodes),
+                    **kw) for k in range(1 if opts.endo_only else 2)]
+    endo = _smoothed(tracks[0].points @ rounding.T, opts)
+    epi = _smoothed(tracks[1].points @ rounding.T, opts) if len(tracks) > 1 else \
         np.zeros((len(endo), 0, 2))
     angle = _reference_angle(opts, endo[opts.reference_frame], masks, spacing)
     values = wall_strain(endo, epi, reference=opts.reference_frame, segments=opts.segments,
                          angle=angle)
     params = dict(opts.record(), reference_angle=angle, spacing=list(spacing), unit=unit,
-                  track=topts.record(), morph=kw["morph_options"].record())
+                  rounding=rounding.tolist(), track=topts.record(),
+                  morph=kw["morph_options"].record())
     return Strain(**values, endo=endo, epi=epi, reference=opts.reference_frame,
                   reference_angle=angle, names=names, tracks=tuple(tracks),
                   masks=masks, spacing=spacing, params=params)
 
 
+def rounding_stretch(endo: np.ndarray) -> np.ndarray:
+    """The area-keeping linear map (2, 2) that takes a circle to the ellipse of the same
+    second moments as the area inside ``endo`` (m, 2): symmetric, determinant 1; the
+    identity for a circle. ``correspondence="normal"`` tracks the walls mapped by its
+    inverse (the reference endocardium made round), where the normals of an elliptical
+    wall are its rays from the centre (:data:`ROUNDING`)."""
+    x, y = (endo - polygon_centroid(endo)).T
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    cross = x * yn - xn * y
+    moments = np.array([[(x * x + x * xn + xn * xn) @ cross * 2,
+                         (x * yn + 2 * x * y + 2 * xn * yn + xn * y) @ cross],
+                        [0.0, (y * y + y * yn + yn * yn) @ cross * 2]])
+    moments[1, 0] = moments[0, 1]  # 24 x the second moments (Green's theorem), any sign
+    values, vectors = np.linalg.eigh(moments * np.sign(cross.sum()))
+    if values.min() <= 0:
+        return np.eye(2)
+    axes = np.sqrt(values / np.sqrt(values.prod()))
+    return (vectors * axes) @ vectors.T
+
+
 def _smoothed(points: np.ndarray, opts: StrainOptions) -> np.ndarray:
-    """Tracked nodes (F, m, 2) smoothed over time (``smooth_frames``; sequences of
-    :data:`SMOOTH_MIN_FRAMES` frames or more)."""
+    """Nodes (F, m, 2) smoothed over time (cines of :data:`SMOOTH_MIN_FRAMES` frames+)."""
     if not opts.smooth_frames or len(points) < SMOOTH_MIN_FRAMES:
         return points
     from scipy.ndimage import gaussian_filter1d
@@ -292,8 +308,7 @@ def _morph_options(value) -> MorphOptions:
 
 def _observed(contours, nodes: int) -> list:
     """The contours to track: frame 0 with ``nodes`` nodes (the material points), the
-    others ``DENSE`` times denser, so a node pulled to its nearest observed node lands
-    within a fraction of its spacing of the curve (no snapping along it)."""
+    others ``DENSE`` times denser (a node pulled to its nearest one does not snap)."""
     return [resample(c, nodes if f == 0 else DENSE * nodes) for f, c in enumerate(contours)]
 
 
@@ -417,7 +432,8 @@ def _reference_angle(opts: StrainOptions, ref_endo, masks, spacing) -> float:
     width = 360.0 / opts.segments
     centre = polygon_centroid(ref_endo)
     if opts.rv_point is not None:
-        d = np.asarray(opts.rv_point) - centre
+        d = np.asarray(opts.rv_point, dtype=float) - centre
+        _check_rv_point(opts.rv_point, d, ref_endo, masks, spacing)
         return float(np.mod(np.degrees(np.arctan2(-d[1], d[0])) - width, 360.0))
     if opts.rv_label is not None:
         if masks is None:
@@ -430,6 +446,23 @@ def _reference_angle(opts: StrainOptions, ref_endo, masks, spacing) -> float:
         d = np.array([cols.mean() * spacing[0], rows.mean() * spacing[1]]) - centre
         return float(np.mod(np.degrees(np.arctan2(-d[1], d[0])) - 2 * width, 360.0))
     return float(opts.reference_angle)
+
+
+def _check_rv_point(point, d: np.ndarray, ref_endo: np.ndarray, masks, spacing) -> None:
+    """Refuse an RV point off the image (masks) or nearer the centre than
+    :data:`RV_MIN_DISTANCE` (its direction means nothing)."""
+    where, spacing = f"rv_point ({point[0]:g}, {point[1]:g})", np.asarray(spacing, float)
+    if masks is not None:
+        low, high = -0.5 * spacing, (np.array(masks.shape[:0:-1]) - 0.5) * spacing
+        if np.any(np.asarray(point) < low) or np.any(np.asarray(point) > high):
+            raise OptionError(f"{where} lies outside the image: x {low[0]:g}..{high[0]:g}, "
+                              f"y {low[1]:g}..{high[1]:g} (image units, y down)")
+    radius = np.linalg.norm(ref_endo - (point - d), axis=1).mean()
+    if np.hypot(*d) < RV_MIN_DISTANCE * radius:
+        raise OptionError(f"{where} lies {np.hypot(*d):.3g} from the ventricle's centre, "
+                          f"under {RV_MIN_DISTANCE:g} x the endocardium's mean radius "
+                          f"{radius:.3g}: it gives no direction for the segments; give the "
+                          f"RV insertion point on the wall")
 
 
 # ------------------------------------------------------------------------------ inputs
@@ -477,7 +510,8 @@ def mask_ring(mask, name: str, options: StrainOptions | None = None, *,
     """``(endocardium (m, 2), epicardium (m, 2) or None)`` of a myocardium mask.
 
     The wall is the ``label`` pixels (or every non-zero pixel); of several 8-connected
-    objects the chosen one (``object``, by io's rule; said in a warning, or to ``say``
+    objects the chosen one (``object``, by io's rule, except that ``"largest"`` takes the
+    largest object with a hole when the largest has none; said in a warning, or to ``say``
     when given); its largest hole is the endocardium, its outer boundary the epicardium,
     each resampled to ``nodes`` nodes, in ``(x, y) = (column, row) * spacing``.
     ``endo_only``: the hole, or without one the object's own boundary (a blood-pool
@@ -496,19 +530,49 @@ def mask_ring(mask, name: str, options: StrainOptions | None = None, *,
     if not wall.any():
         raise ShapeError(f"{name}: the mask is empty (no wall pixel)")
     say = say or (lambda text: warnings.warn(text, stacklevel=3))
-    wall = choose_objects(wall, opts.object, name, connectivity=2, say=say)[0]
-    holes, count = ndimage.label(ndimage.binary_fill_holes(wall) & ~wall)
-    sizes = np.bincount(holes.ravel())[1:]
-    if not count or sizes.max() < MIN_HOLE_PIXELS:
+    ring = _ring_object(wall, opts, name, say)
+    hole = _largest_hole(ring)
+    if not hole.any():
         if opts.endo_only:
-            return _outline(wall, spacing), None
+            return _outline(ring, spacing), None
+        several = "" if np.array_equal(ring, wall) else (
+            "; none of the mask's objects has one" if opts.object == "largest" else
+            f"; object={opts.object!r} chose it, object= chooses another")
         raise ShapeError(f"{name}: the wall has no hole (not a ring: no endocardium inside "
-                         f"an epicardium); check the label, or pass endo_only "
+                         f"an epicardium{several}); check the label, or pass endo_only "
                          f"(--endo-only) for endocardial strain only")
-    endo = _outline(holes == 1 + np.argmax(sizes), spacing)
+    endo = _outline(hole, spacing)
     if opts.endo_only:
         return endo, None
-    return endo, _outline(ndimage.binary_fill_holes(wall), spacing)
+    return endo, _outline(ndimage.binary_fill_holes(ring), spacing)
+
+
+def _ring_object(wall: np.ndarray, opts: StrainOptions, name: str, say) -> np.ndarray:
+    """The wall's object: io's choice, but for ``object="largest"`` (not ``endo_only``)
+    the largest object with a hole, a wall, when the largest has none (said)."""
+    from skimage.measure import label
+
+    labels, count = label(wall, connectivity=2, return_num=True)  # io's numbering
+    area = np.bincount(labels.ravel(), minlength=count + 1)[1:]
+    ringed = [k for k in np.argsort(-area) if _largest_hole(labels == k + 1).any()] \
+        if opts.object == "largest" and not opts.endo_only and count > 1 else []
+    if not ringed or ringed[0] == np.argmax(area):
+        return choose_objects(wall, opts.object, name, connectivity=2, say=say)[0]
+    pick, largest = int(ringed[0]), int(np.argmax(area))
+    say(f"{name}: object {pick + 1} of {count} (the largest with a hole, a wall; object "
+        f"{largest + 1}, {area[largest]} px, has none): {area[pick]} px; object= chooses "
+        f"another")
+    return labels == pick + 1
+
+
+def _largest_hole(region: np.ndarray) -> np.ndarray:
+    """The largest hole of a region (bool), empty if none has :data:`MIN_HOLE_PIXELS`."""
+    from scipy import ndimage
+
+    holes, count = ndimage.label(ndimage.binary_fill_holes(region) & ~region)
+    sizes = np.bincount(holes.ravel())[1:]
+    return holes == 1 + np.argmax(sizes) if count and sizes.max() >= MIN_HOLE_PIXELS \
+        else np.zeros_like(region)
 
 
 def _outline(region: np.ndarray, spacing) -> np.ndarray:

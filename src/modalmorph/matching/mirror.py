@@ -34,9 +34,10 @@ log = logging.getLogger(__name__)
 # none of a heart or an O): the ratio at least 1.54. The gate decides the cost: g0 > 0.12
 # on 14 of the 159 pairs of benchmarks/speed.py, whose second match adds ~30-50 % to a
 # match (0.031 -> 0.041 CPU s at 250 nodes; the third runs only on the few said after
-# it), and 993 of the 1148 said (the reviewer's STIX -> cmr10 pairs at 200 nodes mirrored
-# in x: 23 of 29, was 11); at 0.10, 38 of 159 pay for 1049 (25 of 29; the misses then all
-# under the gate: same-font A K Q 3 8 e S G, of asymmetry 0.05-0.096).
+# it), and 984 of the 1148 said (993 before session 16's turn rule; the reviewer's STIX
+# -> cmr10 pairs at 200 nodes mirrored in x: 23 of 29, was 11); at 0.10, 38 of 159 pay
+# for 1049 (25 of 29; the misses then all under the gate: same-font A K Q 3 8 e S G, of
+# asymmetry 0.05-0.096).
 MIRROR_SUSPECT = 0.12
 MIRROR = 1.4
 _BRUTE = 250_000  # node pairs measured all at once by mirror_gap (a 250 x 1000 pair: 2 MB)
