@@ -252,3 +252,19 @@ def test_auto_sigma_on_the_model_s_own_factor(hand200, monkeypatch, nominal):
         assert model.sigma < nominal
     for a, b in zip(first, whitened(model), strict=True):
         assert np.array_equal(a, b)
+
+
+def test_model_offsets_and_squared_norms_as_broadcast_and_einsum():
+    """FEModel's offset table, made a component at a time, and its 2D squared norms from
+    the components: the broadcast difference and :func:`squared_norms` bit for bit."""
+    from modalmorph.core.element import squared_norms
+    from modalmorph.core.model import FEModel
+
+    rng = np.random.default_rng(5)
+    for m, d in ((7, 2), (70, 2), (33, 3)):
+        model = FEModel(rng.normal(size=(m, d)) * rng.uniform(0.1, 10))
+        x = model.points
+        r = x[None, :, :] - x[:, None, :]
+        assert np.array_equal(model._offsets, r)  # exact: the same subtractions
+        assert model._offsets.flags.c_contiguous
+        assert np.array_equal(model._r2, squared_norms(r))  # exact: einsum's sums

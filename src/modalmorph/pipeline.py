@@ -214,7 +214,8 @@ def morph(source, target, *, matching=None, options: MorphOptions | None = None,
     if src.dim == 3 and src.has_faces:
         crossed = step_self_intersections(run.shapes, src.faces)
     elif src.dim == 2 and src.ordered:  # a contour folded through itself
-        crossed = np.r_[0, step_crossings(run.shapes[1:], src, (src, tgt))]
+        crossed = step_crossings(run.shapes[1:], src, (src, tgt))
+        crossed = np.concatenate((np.zeros(1, crossed.dtype), crossed))  # np.r_[0, ...]
     turn = None  # the hint's turn, where folds come of a turn taken as straight paths
     if crossed is not None and np.any(crossed) and found is not None and turned is None:
         turn = found.angle

@@ -13,6 +13,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import ShapeError
+from .nearest import nearest_distances
 
 __all__ = ["CURVE_DIMENSION", "CURVE_JUMP", "CURVE_STEP", "FPS_POOL", "FPS_TREE", "GRID_ROUNDS",
            "HUGE", "ImageFrame", "PASSED_KEPT", "Shape", "as_shape", "check_once", "check_pairs",
@@ -232,8 +233,7 @@ class Shape:
     @cached_property
     def spacing(self) -> float:
         """Mean nearest-neighbour distance in normalised units (see :attr:`normalized`)."""
-        dist, _ = cKDTree(self.normalized).query(self.normalized, k=2)
-        return float(dist[:, 1].mean())
+        return float(nearest_distances(self.normalized).mean())
 
     def to_user(self, normalized_points: np.ndarray) -> np.ndarray:
         """Map points from this shape's normalised frame back to the user's coordinates."""
@@ -560,7 +560,7 @@ def check_pairs(pairs, m: int, n: int) -> np.ndarray:
             or pairs[:, 1].max() >= n:
         raise ShapeError(f"matching indices out of range for {m} source and {n} target "
                          "nodes")
-    if len(np.unique(pairs[:, 0])) != len(pairs):
+    if np.bincount(pairs[:, 0].astype(np.intp, copy=False)).max() > 1:  # np.unique: 4x
         raise ShapeError("matching pairs a source node more than once")
     return pairs.astype(np.intp)
 

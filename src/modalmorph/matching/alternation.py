@@ -63,11 +63,13 @@ def _tangents(y: np.ndarray, closed: bool, k: int = 2) -> np.ndarray:
     each side (one-sided at the ends of an open one), robust to noise on single nodes."""
     n = len(y)
     k = max(1, min(k, (n - 1) // 2))
-    t = np.roll(y, -k, axis=0) - np.roll(y, k, axis=0)
-    if not closed:
+    if closed:  # np.roll(y, -k) - np.roll(y, k), 0 < k < n
+        t = np.concatenate((y[k:], y[:k])) - np.concatenate((y[n - k:], y[:n - k]))
+    else:
         idx = np.arange(n)
         t = y[np.minimum(idx + k, n - 1)] - y[np.maximum(idx - k, 0)]
-    return t / np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
+    norm = np.sqrt(np.add.reduce(t * t, axis=1, keepdims=True))  # np.linalg.norm's numbers
+    return t / np.maximum(norm, 1e-300)
 
 
 def _modal_deformation(phi: np.ndarray, freq: np.ndarray, rotation: np.ndarray,

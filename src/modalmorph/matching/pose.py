@@ -110,9 +110,20 @@ def _axes(x: np.ndarray) -> np.ndarray:
     signed by the third moment along it: they turn with the points (rotation covariant)."""
     _, e = np.linalg.eigh(x.T @ x)
     e = e * np.where(np.sum((x @ e) ** 3, axis=0) < 0, -1.0, 1.0)
-    if np.linalg.det(e) < 0:
+    # the determinant of orthonormal axes is +-1: its sign by the 2 x 2 formula in 2D
+    det = e[0, 0] * e[1, 1] - e[0, 1] * e[1, 0] if len(e) == 2 else np.linalg.det(e)
+    if det < 0:
         e[:, 0] = -e[:, 0]
     return e
+
+
+def _turns(t: np.ndarray) -> np.ndarray:
+    """2D rotations (r, 2, 2) by the angles ``t`` (radians): ``[[c, -s], [s, c]]`` (the
+    array np.stack made, filled in place)."""
+    c, s = np.cos(t), np.sin(t)
+    out = np.empty((len(t), 2, 2))
+    out[:, 0, 0], out[:, 0, 1], out[:, 1, 0], out[:, 1, 1] = c, -s, s, c
+    return out
 
 
 def _rotations(d: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -123,15 +134,21 @@ def _rotations(d: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     ex, ey = _axes(x), _axes(y)
     if d == 2:
         R0 = ey @ ex.T
-        t = 2 * np.pi * np.arange(_ANGLES) / _ANGLES
-        c, s = np.cos(t), np.sin(t)
-        return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2) @ R0
+        return _CIRCLE @ R0
     out = []
     for signs in itertools.product([1.0, -1.0], repeat=3):
         R = ey @ np.diag(signs) @ ex.T
         if np.linalg.det(R) > 0:
             out.append(R)
     return np.array(out)
+
+
+# the fixed 2D turns of the pose search (made once: 25 us a match)
+_CIRCLE = _turns(2 * np.pi * np.arange(_ANGLES) / _ANGLES)
+_SMALL = _turns(np.radians(_SMALL_TURNS))
+_COMMON_COS = np.cos(np.radians(COMMON_ANGLE))
+_CIRCLE.setflags(write=False)
+_SMALL.setflags(write=False)
 
 
 def _pose_candidates(d: int, x: np.ndarray, y: np.ndarray, rotation: str
@@ -145,13 +162,11 @@ def _pose_candidates(d: int, x: np.ndarray, y: np.ndarray, rotation: str
         return eye, np.ones(1, bool), np.ones(1)
     rots = _rotations(d, x, y)
     if rotation == "auto" and d == 2:  # the identity first, then small turns about it
-        c, s = np.cos(np.radians(_SMALL_TURNS)), np.sin(np.radians(_SMALL_TURNS))
-        small = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
-        rots = np.concatenate([eye, small, rots])
+        rots = np.concatenate([eye, _SMALL, rots])
     elif rotation == "auto":
         rots = np.concatenate([eye, rots])
     cos = (np.trace(rots, axis1=1, axis2=2) - (d - 2)) / 2  # cos of the rotation angle
-    return rots, cos >= np.cos(np.radians(COMMON_ANGLE)) - 1e-12, cos
+    return rots, cos >= _COMMON_COS - 1e-12, cos
 
 
 def _pose_search(C: np.ndarray, low: np.ndarray, candidates: np.ndarray, closed: bool,
@@ -240,7 +255,9 @@ def contour_pose(p: Problem) -> Pose:
     if reverse:
         jj = len(cj) - 1 - jj
     xs, ys = p.src.normalized[ci[keep]], p.tgt.normalized[cj[jj[keep]]]
-    return Pose(align(xs, ys, rotate=rotate), align(xs, ys), reverse, rotate, common)
+    turned = align(xs, ys)  # the same fit twice where the pose may rotate (immutable)
+    return Pose(turned if rotate else align(xs, ys, rotate=False), turned, reverse, rotate,
+                common)
 
 
 def _trimmed_icp(x: np.ndarray, y: np.ndarray, sim: Similarity, trim: float,

@@ -98,12 +98,12 @@ def _untangle(t: np.ndarray, cost: np.ndarray, n: int, skip: float, strict: bool
     keep = np.ones(len(t), bool)
     while True:
         idx = np.flatnonzero(keep)
-        steps = np.diff(np.r_[t[idx], t[idx[:1]]]) % n  # to the next partner, cyclically
+        steps = np.diff(np.concatenate((t[idx], t[idx[:1]]))) % n  # to the next partner
         if idx.size < 2 or steps.sum() <= n:  # round once (or all on one target)
             return keep
         k = int(np.argmax(steps))  # the step back, seen as nearly a whole turn
         r = np.roll(idx, -(k + 1))
-        u = t[r[0]] + np.r_[0, np.cumsum(np.roll(steps, -(k + 1))[:-1])]
+        u = t[r[0]] + np.concatenate(([0], np.cumsum(np.roll(steps, -(k + 1))[:-1])))
         first, last = u[0] + n, u[-1] - n  # how far each end may reach
         end = r[u >= first] if strict else r[u > first]
         start = r[u <= last] if strict else r[u < last]
@@ -125,8 +125,9 @@ def _pairs_from_j(j: np.ndarray, cost: np.ndarray, one_to_one: bool):
     the pair's cost ``cost`` (m,) of every source node."""
     i = np.flatnonzero(j >= 0)
     pairs = _columns(i, j[i])
-    # a cyclic search may reuse a target once across the cut (rarely: a count finds it,
-    # 10 us against the stable sort and unique's 50 at 70 nodes)
+    # a cyclic search may reuse a target once across the cut (68 of the 142 searches of
+    # the 16 heart pairs at 70 nodes; a count finds it, 10 us against the stable sort and
+    # unique's 50; a loop over the shared targets instead was no faster)
     if one_to_one and len(pairs) and np.bincount(pairs[:, 1]).max() > 1:
         order = np.argsort(cost[i], kind="stable")
         _, first = np.unique(pairs[order, 1], return_index=True)

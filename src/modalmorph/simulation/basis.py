@@ -81,13 +81,15 @@ def similarity_fields(points: np.ndarray) -> np.ndarray:
     similarity displacement ``(s R - I) X + t`` lies in their span; in 3D only small
     rotations do."""
     m, d = points.shape
-    fields = [np.kron(np.eye(d)[a], np.ones(m)) for a in range(d)]  # translations
-    fields.append(points.T.reshape(-1))  # dilation X
-    for a, b in ((0, 1),) if d == 2 else ((0, 1), (0, 2), (1, 2)):  # rotations
-        r = np.zeros((d, m))
-        r[a], r[b] = -points[:, b], points[:, a]
-        fields.append(r.reshape(-1))
-    return np.column_stack(fields)
+    turns = ((0, 1),) if d == 2 else ((0, 1), (0, 2), (1, 2))
+    out = np.zeros((d * m, d + 1 + len(turns)))  # np.column_stack's array, filled in place
+    for a in range(d):  # translations
+        out[a * m:(a + 1) * m, a] = 1.0
+    out[:, d] = points.T.reshape(-1)  # dilation X
+    for k, (a, b) in enumerate(turns):  # rotations
+        out[a * m:(a + 1) * m, d + 1 + k] = -points[:, b]
+        out[b * m:(b + 1) * m, d + 1 + k] = points[:, a]
+    return out
 
 
 def smooth_fields(model: FEModel, n: int) -> np.ndarray:
