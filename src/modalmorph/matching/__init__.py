@@ -59,7 +59,7 @@ from ..errors import OptionError, ShapeError
 from ..options import METHODS, ROTATIONS, MatchOptions
 from ..threads import blas_threads, limit
 from .alternation import Placement, alternate, fits, keep_or_turn
-from .clouds import cube_levels, finer, refine, stretch
+from .clouds import cube_levels, finer, measures, refine, stretch
 from .coherent import rigid_pose, settle
 from .contours import keep_partners, match_contours
 from .features import (
@@ -418,19 +418,19 @@ def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndar
         return refine(x, z, y, start)  # level before the nodes': nothing to compare
     large, posed = len(x) > CHOICE_NODES, align(x, z).apply(x)
     starts, yj = (z, rigid_pose(posed, y).apply(posed)), y[j]
-    tree = cKDTree(yj)
-    trim = _GAP_TRIM * tree.query(yj, k=2)[0][:, 1].mean()
-    decay = POSE_DECAY if large else 0.0
-    firsts = [refine(x[i], s[i], yj, start, levels=1, decay=decay) for s in starts]
+    tree, known = cKDTree(yj), measures(x[i], yj)  # the subsets' spacing and masses
+    trim, once = _GAP_TRIM * known[0], partial(refine, decay=POSE_DECAY * large, reuse=large)
+    firsts = [once(x[i], s[i], yj, start, levels=1, known=known) for s in starts]
     gaps = [surface_gap(f, yj, trim, tree=tree) for f in firsts]
     best = int(gaps[1] < gaps[0]) if large else int(gaps[0] >= _START_GAIN * gaps[1])
     z = firsts[best]
     if len(i) < len(x):  # the subset's first level carried to every node
         z = starts[best] + _carried(x[i], z - starts[best][i], x, 1.0)
+    known = known if len(i) == len(x) else measures(x, y)
     if not large or cube_levels(len(y), finer(start, 1)) < 2:
-        return refine(x, z, y, finer(start, 1))  # from its second level on
-    z = refine(x, z, y, finer(start, 1), levels=1, decay=decay)  # its second level
-    return refine(x, z, y, finer(start, 2), smoothing=HUGE_SMOOTHING)  # the finer, stiffer
+        return refine(x, z, y, finer(start, 1), known=known)  # from its second level on
+    z = once(x, z, y, finer(start, 1), levels=1, known=known)  # its second level
+    return once(x, z, y, finer(start, 2), smoothing=HUGE_SMOOTHING, known=known, decay=0.0)
 
 
 def _coarse_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
@@ -463,14 +463,14 @@ def _huge_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> n
     sub_s = Shape(x, ordered=False)
     sub_t = Shape(tgt.points[even_subset(tgt.normalized, int(keep * tgt.m))], ordered=False)
     landed, start = _coarse_landing(sub_s, sub_t, n_modes, opts)
-    landed = sub_t.to_normalized(landed)
+    landed, xs, ys = sub_t.to_normalized(landed), sub_s.normalized, sub_t.normalized
+    once = partial(refine, x=xs, y=ys, known=measures(xs, ys))  # masses found once
     for level, passes in ((1, POSE_PASSES), (2, FINE_PASSES)):  # refine's first levels
         for _ in range(passes):
             posed = sub_t.to_normalized(align(x, sub_t.to_user(landed)).apply(x))
-            landed = refine(sub_s.normalized, posed, sub_t.normalized,
-                            finer(start, level - 1), levels=1, smoothing=_SMOOTHING[level])
-    landed = refine(sub_s.normalized, landed, sub_t.normalized, finer(start, 2),  # its third
-                    smoothing=HUGE_SMOOTHING)
+            landed = once(z=posed, start=finer(start, level - 1), levels=1,
+                          smoothing=_SMOOTHING[level])
+    landed = once(z=landed, start=finer(start, 2), smoothing=HUGE_SMOOTHING)  # its third
     landed = tgt.to_normalized(sub_t.to_user(landed))
     sim = align(x, landed)
     return sim.apply(src.points) + _carried(x, landed - sim.apply(x), src.points, src.size)
