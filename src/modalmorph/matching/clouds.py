@@ -22,6 +22,7 @@ nearest neighbours (beyond the best similarity). Memory is linear in the node co
 from __future__ import annotations
 
 from itertools import count
+from typing import NamedTuple
 
 import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
@@ -30,7 +31,7 @@ from scipy.spatial import cKDTree
 from ..core.shape import even_subset
 from ..threads import blas_threads
 
-__all__ = ["cube_levels", "finer", "measures", "refine", "stretch"]
+__all__ = ["Measures", "cube_levels", "finer", "measures", "refine", "stretch"]
 
 _ROUNDS = 3  # transport and smoothing rounds of the last level, the nodes (not measured)
 _FEW = 0.25  # a level with fewer cubes than this x the source nodes is cheap: more rounds
@@ -203,20 +204,30 @@ def _transport(z: np.ndarray, mu: np.ndarray, y: np.ndarray, nu: np.ndarray,
     return (plan @ y) / np.maximum(row, 1e-300)[:, None], np.minimum(row / mu, 1.0)
 
 
-def measures(x: np.ndarray, y: np.ndarray) -> tuple:
-    """What :func:`refine` measures of the source ``x`` and the target ``y`` before it
-    moves anything, the same for every call on them, for a caller that refines one pair
-    more than once: the target's mean node spacing, the masses of both (the area each
-    node stands for, :func:`_area`; the target's scaled to the source's total) and each
-    source node's nearest nodes (:func:`_nearest`)."""
+class Measures(NamedTuple):
+    """What :func:`refine` measures of a source and a target before it moves anything
+    (:func:`measures`), and how it builds their transports' graphs."""
+
+    spacing: float  # the target's mean node spacing
+    wx: np.ndarray  # the source's masses: the area each node stands for (_area)
+    wy: np.ndarray  # the target's, scaled to the source's total
+    near: np.ndarray  # each source node's _AVERAGE nearest nodes (_nearest)
+    reuse: bool  # every level's graphs kept for _REGRAPH rounds, not only the largest
+
+
+def measures(x: np.ndarray, y: np.ndarray, reuse: bool = False) -> Measures:
+    """:class:`Measures` of the source ``x`` and the target ``y``, the same for every
+    :func:`refine` of them, for a caller that refines one pair more than once; ``reuse``:
+    keep every level's transport graph for ``_REGRAPH`` rounds (a large set: the caller's
+    choice), not only the graphs of more than ``_MANY_POINTS`` points a side."""
     spacing = cKDTree(y).query(y, k=2, workers=blas_threads(len(y)))[0][:, 1].mean()
     wx, near = _nearest(x)
-    return float(spacing), wx, _area(y) * (len(x) / len(y)), near
+    return Measures(float(spacing), wx, _area(y) * (len(x) / len(y)), near, reuse)
 
 
 def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
            levels: int | None = None, smoothing: float = _WIDTH, decay: float = 0.0,
-           known: tuple | None = None, reuse: bool = False) -> np.ndarray:
+           known: Measures | None = None) -> np.ndarray:
     """Where the source lands on the target, refined coarse to fine.
 
     The first level summarises the target in cubes of about ``4 * start`` node counts'
@@ -250,11 +261,8 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
         their best affine map (:func:`_affine`) shrinks (0, the default: none): the
         affine map takes the pose instead of a smooth field that can hold a turn as
         well (:mod:`modalmorph.matching`, ``POSE_DECAY``).
-    known : tuple, optional
-        :func:`measures` of ``x`` and ``y`` (found here when not given).
-    reuse : bool, optional
-        Keep every level's transport graph for ``_REGRAPH`` rounds (a large set: the
-        caller's choice), not only the graphs of more than ``_MANY_POINTS`` points a side.
+    known : Measures, optional
+        :func:`measures` of ``x`` and ``y`` (found here, ``reuse`` False, when not given).
 
     Returns
     -------
@@ -262,7 +270,7 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
         The refined positions of the source nodes.
     """
     m, n = len(x), len(y)
-    spacing, wx, wy, near = measures(x, y) if known is None else known
+    spacing, wx, wy, near, reuse = measures(x, y) if known is None else known
     width = spacing * np.sqrt(n / max(start, 1))  # a source of under 4 nodes: start 0
     for level in count(1):
         width = max(width / _STEP, spacing)
