@@ -169,11 +169,6 @@ POSE_DECAY = 0.02
 # 1.63 spacings but 180 deg 2.06 -> 2.81; the nearer: 30 deg 2.12 -> 1.79, 90 deg 1.85 ->
 # 1.88, 0 and 180 deg unchanged, 50 000 points at 180 deg 3.41 -> 3.15; base within 0.01).
 _START_GAIN = 0.95
-# Above CHOICE_NODES, refine's second level again this many times, each from the landings' best
-# similarity (blob, 100 000 points, median (p90) pair error in spacings, none -> 1: resampled 0
-# deg 1.78 (3.53) -> 1.57 (3.53); base 30 deg 0.86 (1.42) same; bunny base 180 deg 0.85 (1.35)
-# -> 0.84 (1.33); 2: resampled 0 deg 1.52), 1.7 CPU-s each (docs/issue25/scale.md, big11).
-REPOSE = 1
 _REJECT = 16.0  # pairs costing more are dropped: 4 target spacings (not measured)
 
 
@@ -406,9 +401,9 @@ def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndar
     match (carried from coarse nodes, it can hold the refinement away from the truth, or a
     turn, on two samplings of one surface). Up to ``CHOICE_NODES`` source nodes ``z`` is kept
     only where it lies ``_START_GAIN`` times nearer. Above, both are tried on even subsets,
-    the first levels keep the deformation from taking the pose (``POSE_DECAY``), the second
-    runs ``REPOSE`` times more from its similarity and the levels from the third are
-    smoothed ``HUGE_SMOOTHING`` cube widths wide."""
+    the first levels keep the deformation from taking the pose (``POSE_DECAY``), the levels
+    keep their transports' graphs for a few rounds (``Measures.reuse``) and the levels from
+    the third are smoothed ``HUGE_SMOOTHING`` cube widths wide."""
     i, j = np.arange(len(x)), np.arange(len(y))
     if len(x) > CHOICE_NODES:  # as wide cubes: an even subset's spacing grows as its count falls
         i = even_subset(x, CHOICE_NODES)
@@ -427,9 +422,7 @@ def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndar
         z, known = begun + _carried(x[i], z - begun[i], x, 1.0), measures(x, y, large)
     if not large or cube_levels(len(y), finer(start, 1)) < 2:
         return refine(x, z, y, finer(start, 1), known=known)  # from its second level on
-    z = once(x, z, y, finer(start, 1), levels=1, known=known)  # its second level, then
-    for _ in range(REPOSE):  # again from the similarity of its landings
-        z = once(x, align(x, z).apply(x), y, finer(start, 1), levels=1, known=known)
+    z = once(x, z, y, finer(start, 1), levels=1, known=known)  # its second level
     return once(x, z, y, finer(start, 2), smoothing=HUGE_SMOOTHING, known=known, decay=0.0)
 
 
