@@ -10,6 +10,8 @@ Two measures of one case of ``match3d.py`` (same generator, noise 0.01):
   pairs (nearest target point), in target spacings: where the route gains or loses;
   ``--repose N``: the second level N times more, each from its landings' best similarity
   (measured in docs/issue25/scale.md, session 16; not in the route).
+- ``--floor``: the median pair error (nearest target point) of landings moved r target
+  spacings from the truth along the surface, r = 0 (the benchmark's ``best``) to 2.
 
     OMP_NUM_THREADS=1 MODALMORPH_BLAS_THREADS=1 OPENBLAS_NUM_THREADS=1 PYTHONPATH=src \\
         python benchmarks/route_stages.py blob 100000 30 base [--levels]
@@ -122,6 +124,22 @@ def levels(src, tgt, truth, args_repose: int = 0) -> None:
         x, z, y, C.finer(start, 2 + k + 1), known=known, decay=0.0, smoothing=M.HUGE_SMOOTHING))
 
 
+def floor(src, tgt, truth) -> None:
+    """The median pair error (nearest target point) of landings r target spacings from the
+    truth along the surface (a random tangential direction: the target's local plane)."""
+    tree = cKDTree(tgt)
+    h = tree.query(tgt, k=2)[0][:, 1].mean()
+    near = tgt[tree.query(truth, k=16)[1]]
+    near = near - near.mean(axis=1, keepdims=True)
+    normal = np.linalg.eigh(np.einsum("nki,nkj->nij", near, near))[1][:, :, 0]
+    d = np.random.default_rng(1).normal(size=truth.shape)
+    d -= np.sum(d * normal, axis=1)[:, None] * normal
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    for r in (0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0):
+        e = np.linalg.norm(tgt[tree.query(truth + r * h * d)[1]] - truth, axis=1) / h
+        print(f"  landing {r:4.2f} spacings off: pairs {np.median(e):5.2f}")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("shape")
@@ -129,14 +147,17 @@ def main(argv=None) -> int:
     p.add_argument("angle", type=float)
     p.add_argument("variant", choices=list(VARIANTS))
     p.add_argument("--levels", action="store_true", help="landings level by level")
+    p.add_argument("--floor", action="store_true", help="pair error against landing error")
     p.add_argument("--repose", type=int, default=0, help="with --levels: the second level "
                    "this many times more, each from its landings' best similarity")
     args = p.parse_args(argv)
-    if args.points <= M.CHOICE_NODES:
+    if args.points <= M.CHOICE_NODES and not args.floor:
         p.error(f"the route measured here runs above {M.CHOICE_NODES} points")
     src, tgt, truth = make_case(args.shape, args.points, args.angle, 0.01,
                                 **VARIANTS[args.variant])
-    if args.levels:
+    if args.floor:
+        floor(src, tgt, truth)
+    elif args.levels:
         levels(src, tgt, truth, args.repose)
     else:
         times(src, tgt, truth)
