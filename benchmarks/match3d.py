@@ -31,7 +31,8 @@ error of pairing each source point with the target point nearest to where the tr
 best similarity takes it: the pose alone, no deformation), med/p90 (median
 and 90th percentile error of the pairs returned), paired (the fraction of source points
 given a partner), <=1 / <=3 (fraction of source points whose pair is within 1 and 3
-spacings; unpaired points count as wrong), sym (for a body with a symmetry, the torus and
+spacings; unpaired points count as wrong), med/best (the median over the floor `best`:
+how far a row is from what a pairing can reach), sym (for a body with a symmetry, the torus and
 the bone (:func:`bone_turns`): the median error under the best of its symmetries, what a
 correspondence can identify there; NaN for the others), time and peak memory (each case
 in its own process: peak resident set size of the child, MB), and the machine's load
@@ -366,9 +367,9 @@ def one(method: str, shape: str, m: int, angle: float, noise: float,
         variant: str = "base") -> dict:
     src, tgt, truth, move = make_case(shape, m, angle, noise, carry=True,
                                       **VARIANTS[variant])
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     pairs = PEERS[method](src, tgt)
-    seconds = time.perf_counter() - t0
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # before the scoring
     load = os.getloadavg()[0]
     err, h = errors(src, tgt, truth, pairs)
@@ -382,7 +383,7 @@ def one(method: str, shape: str, m: int, angle: float, noise: float,
                 sym=modulo_symmetry(shape, src, tgt, move, pairs, h),
                 p90=float(np.percentile(paired, 90)),
                 paired=len(paired) / len(err), w1=float(np.mean(err <= 1)),
-                w3=float(np.mean(err <= 3)), s=seconds, peak=peak, load=load)
+                w3=float(np.mean(err <= 3)), s=seconds, cpu=cpu, peak=peak, load=load)
 
 
 def child(args, method, shape, m, angle, variant="base") -> dict | str:
@@ -428,8 +429,8 @@ def main(argv=None) -> int:
           f"{WARP[0]:.0%}-{WARP[1]:.0%}; variants: {VARIANTS}; error in target spacings; "
           f"peak RSS in MB")
     print(f"{'shape':>7} {'variant':>7} {'points':>7} {'angle':>5} {'method':>10} {'best':>5} "
-          f"{'sim':>5} {'med':>6} {'sym':>5} "
-          f"{'p90':>6} {'paired':>6} {'<=1':>5} {'<=3':>5} {'time s':>7} {'peak':>6} "
+          f"{'sim':>5} {'med':>6} {'/best':>5} {'sym':>5} "
+          f"{'p90':>6} {'paired':>6} {'<=1':>5} {'<=3':>5} {'time s':>7} {'cpu s':>6} {'peak':>6} "
           f"{'load':>5}",
           flush=True)
     for shape in args.shapes.split(","):
@@ -444,10 +445,11 @@ def main(argv=None) -> int:
                              if available(method, shape) else "not installed")
                         print(f"{head} {r:>6}" if isinstance(r, str) else
                               f"{head} {r['best']:>5.2f} {r['sim']:>5.2f} {r['med']:>6.2f} "
-                              f"{r['sym']:>5.2f} "
+                              f"{r['med'] / r['best']:>5.2f} {r['sym']:>5.2f} "
                               f"{r['p90']:>6.2f} "
                               f"{r['paired']:>6.2f} "
                               f"{r['w1']:>5.2f} {r['w3']:>5.2f} {r['s']:>7.2f} "
+                              f"{r['cpu']:>6.2f} "
                               f"{r['peak']:>6.0f} {r['load']:>5.1f}", flush=True)
     return 0
 

@@ -59,7 +59,7 @@ from ..errors import OptionError, ShapeError
 from ..options import METHODS, ROTATIONS, MatchOptions
 from ..threads import blas_threads, limit
 from .alternation import Placement, alternate, fits, keep_or_turn
-from .clouds import cube_levels, finer, refine, stretch
+from .clouds import cube_levels, finer, measures, refine, stretch
 from .coherent import rigid_pose, settle
 from .contours import keep_partners, match_contours
 from .features import (
@@ -93,31 +93,29 @@ FINE_CLOUD = 100_000
 # Coarse or subset nodes whose moves carry a node (inverse-distance weights): the nodes so
 # carried land as well as the subset's own (1M blob: 3.79 and 3.82 spacings).
 CARRY = 4
-# Passes of refine's first level, then FINE_PASSES of its second, each from the best
-# similarity of the landings before it, on the subsets of a set above FINE_CLOUD (the pose
-# the coarse match gives is 2-3 deg off, refine alone halves that, and the first level's
-# passes stop at 0.7-0.9 deg from the truth's rotation whatever the start). 1 000 000
-# points, median pair error in target spacings (docs/issue25/scale.md): with first-level
-# passes only (2, main): blob 0 / 30 / 90 / 180 deg 3.58 / 2.70 / 3.77 / 5.24; 3 and the
-# other levels smoothed 16 wide: 3.10 / 1.86 / 3.27 / 4.24; 1 + 3 second-level passes:
-# 2.03 / - / 3.06 / 3.92; 1 + 5: see the table there (90 deg 2.77, 180 deg 3.83; bunny
-# 30 deg 2.10). On the landings of the blob's subset at 0 deg: the second level's passes
-# take the turn from 0.92 deg to 0.54 / 0.34 / 0.32 deg, 3.10 -> 2.35 / 2.16 / 2.17.
+# Passes of refine's first level, then FINE_PASSES of its second, each from the best similarity of
+# the landings before it, on the subsets of a set above FINE_CLOUD (the pose the coarse match gives
+# is 2-3 deg off, refine alone halves that, and the first level's passes stop at 0.7-0.9 deg from
+# the truth's rotation whatever the start). 1 000 000 points, median pair error in target spacings
+# (docs/issue25/scale.md): with first-level passes only (2, main): blob 0 / 30 / 90 / 180 deg 3.58
+# / 2.70 / 3.77 / 5.24; 3 and the other levels smoothed 16 wide: 3.10 / 1.86 / 3.27 / 4.24; 1 + 3
+# second-level passes: 2.03 / - / 3.06 / 3.92; 1 + 5: see the table there (90 deg 2.77, 180 deg
+# 3.83; bunny 30 deg 2.10). On the landings of the blob's subset at 0 deg: the second level's
+# passes take the turn from 0.92 deg to 0.54 / 0.34 / 0.32 deg, 3.10 -> 2.35 / 2.16 / 2.17.
 POSE_PASSES = 1
 FINE_PASSES = 5
-# Smoothing width (refine's cube widths) of the second level's passes and of the levels
-# after them (refine's own: 8): a finer transport under a stiffer field. After 2 passes of
-# the first level, the levels from the second smoothed 4 / 8 / 16 / 24 wide, landings of
-# the blob's subset at 0 deg 4.12 / 3.51 / 2.95 / -, 90 deg - / 3.65 / 3.27 / 3.75, 180 deg
-# - / 4.70 / 4.19 / 4.53; the bunny's at 30 deg 1.87 / 1.39 / 2.09 / -. 16 at the first
-# level: its field no longer turns (blob 0 deg: 2.2 deg off after 4 passes).
-# Above CHOICE_NODES, _refined smooths refine's levels from the third as wide: on two
-# independent samplings (benchmarks/match3d.py --variants resampled, 100 000 points, 0 /
-# 30 / 90 / 180 deg, with POSE_DECAY; median pair error in target spacings) blob 1.88 /
-# 2.32 / 2.26 / 2.30 -> 1.77 / 2.12 / 1.85 / 2.06, bunny 1.20 / 1.07 / 1.14 / 1.11 ->
-# 1.08 / 0.97 / 1.02 / 1.07 (the finer transports, 2.6-1 spacings wide, pulled by the
-# samplings' chance clumps: blob 0 deg 1.98 -> 2.16 after the first level); base blob
-# 0.96 / 0.84 / 0.94 / 0.91 -> 0.96 / 0.86 / 0.95 / 0.93, bunny 0.84 -> 0.85.
+# Smoothing width (refine's cube widths) of the second level's passes and of the levels after them
+# (refine's own: 8): a finer transport under a stiffer field. After 2 passes of the first level,
+# the levels from the second smoothed 4 / 8 / 16 / 24 wide, landings of the blob's subset at 0 deg
+# 4.12 / 3.51 / 2.95 / -, 90 deg - / 3.65 / 3.27 / 3.75, 180 deg - / 4.70 / 4.19 / 4.53; the
+# bunny's at 30 deg 1.87 / 1.39 / 2.09 / -. 16 at the first level: its field no longer turns (blob
+# 0 deg: 2.2 deg off after 4 passes). Above CHOICE_NODES, _refined smooths refine's levels from the
+# third as wide: on two independent samplings (benchmarks/match3d.py --variants resampled, 100 000
+# points, 0 / 30 / 90 / 180 deg, with POSE_DECAY; median pair error in target spacings) blob 1.88 /
+# 2.32 / 2.26 / 2.30 -> 1.77 / 2.12 / 1.85 / 2.06, bunny 1.20 / 1.07 / 1.14 / 1.11 -> 1.08 / 0.97 /
+# 1.02 / 1.07 (the finer transports, 2.6-1 spacings wide, pulled by the samplings' chance clumps:
+# blob 0 deg 1.98 -> 2.16 after the first level); base blob 0.96 / 0.84 / 0.94 / 0.91 -> 0.96 /
+# 0.86 / 0.95 / 0.93, bunny 0.84 -> 0.85.
 HUGE_SMOOTHING = 16.0
 _SMOOTHING = {1: 8.0, 2: HUGE_SMOOTHING}  # per level of the passes
 # refine() of a 3D point set up to FINE_CLOUD nodes starts this many times coarser than
@@ -148,17 +146,16 @@ _STRETCH_GAIN = 0.5
 # (median 0.84/0.93/0.87 spacings, main 0.85/1.11/1.22; 15.0-15.3 CPU-s, main 15.0-15.7).
 CHOICE_NODES = 10_000
 # Above CHOICE_NODES source nodes, refine's first level (of the subsets' starts and of the
-# refinement after) shrinks the landings' departure from their best affine map by this
-# fraction every round (clouds.refine's decay): a smooth field holds a turn as well as the
-# pose does, and on two independent samplings nothing else pulls it back (blob, 100 000
-# points, benchmarks/match3d.py --variants resampled: the landings' best similarity
-# 1.3 deg from the truth's at 0 deg). Median pair error in target spacings, 0 / 30 / 90 /
-# 180 deg, none -> 0.02: blob resampled 2.83 / 2.39 / 2.23 / 2.45 -> 1.88 / 2.32 / 2.26 /
-# 2.30; bunny resampled 1.22 / 1.09 / 1.15 / 1.12 -> 1.20 / 1.07 / 1.14 / 1.11; base (the
-# target the source's points moved) blob 0.98 / 0.84 / 0.93 / 0.87 -> 0.96 / 0.84 / 0.94 /
-# 0.91, bunny 0.83-0.84 unchanged; same CPU time. The similarity as its target, at 0 deg:
-# 0.01 / 0.02 / 0.05: 2.03 / 1.88 / 2.41; at every level: 2.00; the subsets' or the
-# refinement's first level alone: 2.00 / 2.14.
+# refinement after) shrinks the landings' departure from their best affine map by this fraction
+# every round (clouds.refine's decay): a smooth field holds a turn as well as the pose does, and on
+# two independent samplings nothing else pulls it back (blob, 100 000 points, benchmarks/match3d.py
+# --variants resampled: the landings' best similarity 1.3 deg from the truth's at 0 deg). Median
+# pair error in target spacings, 0 / 30 / 90 / 180 deg, none -> 0.02: blob resampled 2.83 / 2.39 /
+# 2.23 / 2.45 -> 1.88 / 2.32 / 2.26 / 2.30; bunny resampled 1.22 / 1.09 / 1.15 / 1.12 -> 1.20 /
+# 1.07 / 1.14 / 1.11; base (the target the source's points moved) blob 0.98 / 0.84 / 0.93 / 0.87 ->
+# 0.96 / 0.84 / 0.94 / 0.91, bunny 0.83-0.84 unchanged; same CPU time. The similarity as its
+# target, at 0 deg: 0.01 / 0.02 / 0.05: 2.03 / 1.88 / 2.41; at every level: 2.00; the subsets' or
+# the refinement's first level alone: 2.00 / 2.14.
 POSE_DECAY = 0.02
 # refine (_refined) starts from the coarse landing only where, after its first level, that
 # lies nearer the target's surface than this x the rigid pose's (coherent.rigid_pose: the
@@ -354,10 +351,10 @@ def _match_large(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions,
 def _match_cloud(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
                  ) -> tuple[np.ndarray, np.ndarray, Similarity]:
     """The default matcher for unordered 3D point sets: where each source node lands
-    (:func:`_cloud_landing`; above ``FINE_CLOUD`` nodes :func:`_huge_landing`, which has
-    no affine stretch: a similarity and the refinement only), then each
-    source node paired with the target node nearest to where it lands; pairs farther than
-    ``sqrt(reject)`` target spacings are dropped. Cost in squared target spacings."""
+    (:func:`_cloud_landing`; above ``FINE_CLOUD`` nodes :func:`_huge_landing`, which has no affine
+    stretch: a similarity and the refinement only), then each source node paired with the target
+    node nearest to where it lands; pairs farther than ``sqrt(reject)`` target spacings are
+    dropped. Cost in squared target spacings."""
     if max(src.m, tgt.m) > FINE_CLOUD:
         landed = _huge_landing(src, tgt, n_modes, opts)
     else:
@@ -381,12 +378,11 @@ def _match_cloud(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
 
 
 def _cloud_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> np.ndarray:
-    """Where each source node of a 3D point set lands on the target (the target's
-    normalised frame), (m, 3): :func:`_coarse_landing`, stretched by
-    :func:`~modalmorph.matching.clouds.stretch` where that brings the surfaces
-    ``_STRETCH_GAIN`` times closer, then :func:`modalmorph.matching.clouds.refine`, from
-    ``REFINE_COARSER`` times coarser, from those landings or from their similarity alone
-    (:func:`_refined`)."""
+    """Where each source node of a 3D point set lands on the target (the target's normalised
+    frame), (m, 3): :func:`_coarse_landing`, stretched by
+    :func:`~modalmorph.matching.clouds.stretch` where that brings the surfaces ``_STRETCH_GAIN``
+    times closer, then :func:`modalmorph.matching.clouds.refine`, from ``REFINE_COARSER`` times
+    coarser, from those landings or from their similarity alone (:func:`_refined`)."""
     landed, start = _coarse_landing(src, tgt, n_modes, opts)
     z, y = tgt.to_normalized(landed), tgt.normalized
     stretched, trim, tree = stretch(z, y), _GAP_TRIM * tgt.spacing, cKDTree(y)
@@ -398,18 +394,17 @@ def _cloud_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> 
 
 def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndarray:
     """:func:`~modalmorph.matching.clouds.refine` of the landings ``z`` (m, 3) of the
-    source nodes ``x`` on the target ``y`` (normalised frames) from whichever of two
-    starts lies nearer the target's surface after refine's first level
-    (:func:`~modalmorph.matching.pose.surface_gap`, capped at ``_GAP_TRIM`` spacings):
-    ``z`` as it is, or its best similarity alone laid on the target by rigid CPD
-    (:func:`~modalmorph.matching.coherent.rigid_pose`), without the deformation the coarse
-    match gave it (carried from coarse nodes, that can hold the refinement away from the
-    truth: blob, 100 000 points, 90 deg; and a turn that the refinement keeps, on two
-    samplings of one surface). Up to ``CHOICE_NODES`` source nodes ``z`` is kept only
-    where it lies ``_START_GAIN`` times nearer. Above ``CHOICE_NODES`` source nodes both are
-    tried on even subsets of both objects, the first levels keep the deformation from
-    taking the pose (``POSE_DECAY``), and the levels from the third are smoothed
-    ``HUGE_SMOOTHING`` cube widths wide."""
+    source nodes ``x`` on the target ``y`` (normalised frames) from whichever of two starts
+    lies nearer the target's surface after refine's first level
+    (:func:`~modalmorph.matching.pose.surface_gap`, capped at ``_GAP_TRIM`` spacings): ``z``
+    as it is, or its best similarity alone laid on the target by rigid CPD
+    (:func:`~modalmorph.matching.coherent.rigid_pose`), without the deformation of the coarse
+    match (carried from coarse nodes, it can hold the refinement away from the truth, or a
+    turn, on two samplings of one surface). Up to ``CHOICE_NODES`` source nodes ``z`` is kept
+    only where it lies ``_START_GAIN`` times nearer. Above, both are tried on even subsets,
+    the first levels keep the deformation from taking the pose (``POSE_DECAY``), the levels
+    keep their transports' graphs for a few rounds (``Measures.reuse``) and the levels from
+    the third are smoothed ``HUGE_SMOOTHING`` cube widths wide."""
     i, j = np.arange(len(x)), np.arange(len(y))
     if len(x) > CHOICE_NODES:  # as wide cubes: an even subset's spacing grows as its count falls
         i = even_subset(x, CHOICE_NODES)
@@ -418,19 +413,18 @@ def _refined(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int) -> np.ndar
         return refine(x, z, y, start)  # level before the nodes': nothing to compare
     large, posed = len(x) > CHOICE_NODES, align(x, z).apply(x)
     starts, yj = (z, rigid_pose(posed, y).apply(posed)), y[j]
-    tree = cKDTree(yj)
-    trim = _GAP_TRIM * tree.query(yj, k=2)[0][:, 1].mean()
-    decay = POSE_DECAY if large else 0.0
-    firsts = [refine(x[i], s[i], yj, start, levels=1, decay=decay) for s in starts]
+    tree, known = cKDTree(yj), measures(x[i], yj, large)  # the subsets' spacing and masses
+    trim, once = _GAP_TRIM * known.spacing, partial(refine, decay=POSE_DECAY * large)
+    firsts = [once(x[i], s[i], yj, start, levels=1, known=known) for s in starts]
     gaps = [surface_gap(f, yj, trim, tree=tree) for f in firsts]
     best = int(gaps[1] < gaps[0]) if large else int(gaps[0] >= _START_GAIN * gaps[1])
-    z = firsts[best]
-    if len(i) < len(x):  # the subset's first level carried to every node
-        z = starts[best] + _carried(x[i], z - starts[best][i], x, 1.0)
+    z, begun = firsts[best], starts[best]
+    if len(i) < len(x):  # the subset's first level carried to every node, and all measured
+        z, known = begun + _carried(x[i], z - begun[i], x, 1.0), measures(x, y, large)
     if not large or cube_levels(len(y), finer(start, 1)) < 2:
-        return refine(x, z, y, finer(start, 1))  # from its second level on
-    z = refine(x, z, y, finer(start, 1), levels=1, decay=decay)  # its second level
-    return refine(x, z, y, finer(start, 2), smoothing=HUGE_SMOOTHING)  # the finer, stiffer
+        return refine(x, z, y, finer(start, 1), known=known)  # from its second level on
+    z = once(x, z, y, finer(start, 1), levels=1, known=known)  # its second level
+    return once(x, z, y, finer(start, 2), smoothing=HUGE_SMOOTHING, known=known, decay=0.0)
 
 
 def _coarse_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
@@ -450,27 +444,27 @@ def _coarse_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions
 
 def _huge_landing(src: Shape, tgt: Shape, n_modes: int, opts: MatchOptions) -> np.ndarray:
     """Where each source node lands (the target's normalised frame), (m, 3), for sets above
-    ``FINE_CLOUD`` nodes, matched on even subsets of both (the same fraction of each, the
-    larger ``FINE_CLOUD`` nodes): the subset's :func:`_coarse_landing`; ``POSE_PASSES``
-    times the first level of :func:`~modalmorph.matching.clouds.refine`, then
-    ``FINE_PASSES`` times its second (smoothed ``HUGE_SMOOTHING`` cube widths wide), each
-    from the best similarity of the landings so far (the pose, without the deformation
-    that came with it); the levels of ``refine`` from its third, smoothed as wide; and
-    every source node carried by the similarity of the subset's landings (Horn) plus the
-    rest of the move of its ``CARRY`` nearest subset nodes (inverse-distance weights)."""
+    ``FINE_CLOUD`` nodes, matched on even subsets of both (the same fraction of each, the larger
+    ``FINE_CLOUD`` nodes): the subset's :func:`_coarse_landing`; ``POSE_PASSES`` times the first
+    level of :func:`~modalmorph.matching.clouds.refine`, then ``FINE_PASSES`` times its second
+    (smoothed ``HUGE_SMOOTHING`` cube widths wide), each from the best similarity of the landings
+    so far (the pose, without the deformation that came with it); the levels of ``refine`` from its
+    third, smoothed as wide; and every source node carried by the similarity of the subset's
+    landings (Horn) plus the rest of the move of its ``CARRY`` nearest subset nodes
+    (inverse-distance weights)."""
     keep = FINE_CLOUD / max(src.m, tgt.m)
     x = src.points[even_subset(src.normalized, int(keep * src.m))]
     sub_s = Shape(x, ordered=False)
     sub_t = Shape(tgt.points[even_subset(tgt.normalized, int(keep * tgt.m))], ordered=False)
     landed, start = _coarse_landing(sub_s, sub_t, n_modes, opts)
-    landed = sub_t.to_normalized(landed)
+    landed, xs, ys = sub_t.to_normalized(landed), sub_s.normalized, sub_t.normalized
+    once = partial(refine, x=xs, y=ys, known=measures(xs, ys))  # masses found once
     for level, passes in ((1, POSE_PASSES), (2, FINE_PASSES)):  # refine's first levels
         for _ in range(passes):
             posed = sub_t.to_normalized(align(x, sub_t.to_user(landed)).apply(x))
-            landed = refine(sub_s.normalized, posed, sub_t.normalized,
-                            finer(start, level - 1), levels=1, smoothing=_SMOOTHING[level])
-    landed = refine(sub_s.normalized, landed, sub_t.normalized, finer(start, 2),  # its third
-                    smoothing=HUGE_SMOOTHING)
+            landed = once(z=posed, start=finer(start, level - 1), levels=1,
+                          smoothing=_SMOOTHING[level])
+    landed = once(z=landed, start=finer(start, 2), smoothing=HUGE_SMOOTHING)  # its third
     landed = tgt.to_normalized(sub_t.to_user(landed))
     sim = align(x, landed)
     return sim.apply(src.points) + _carried(x, landed - sim.apply(x), src.points, src.size)

@@ -22,6 +22,7 @@ nearest neighbours (beyond the best similarity). Memory is linear in the node co
 from __future__ import annotations
 
 from itertools import count
+from typing import NamedTuple
 
 import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
@@ -30,7 +31,7 @@ from scipy.spatial import cKDTree
 from ..core.shape import even_subset
 from ..threads import blas_threads
 
-__all__ = ["cube_levels", "finer", "refine", "stretch"]
+__all__ = ["Measures", "cube_levels", "finer", "measures", "refine", "stretch"]
 
 _ROUNDS = 3  # transport and smoothing rounds of the last level, the nodes (not measured)
 _FEW = 0.25  # a level with fewer cubes than this x the source nodes is cheap: more rounds
@@ -203,9 +204,30 @@ def _transport(z: np.ndarray, mu: np.ndarray, y: np.ndarray, nu: np.ndarray,
     return (plan @ y) / np.maximum(row, 1e-300)[:, None], np.minimum(row / mu, 1.0)
 
 
+class Measures(NamedTuple):
+    """What :func:`refine` measures of a source and a target before it moves anything
+    (:func:`measures`), and how it builds their transports' graphs."""
+
+    spacing: float  # the target's mean node spacing
+    wx: np.ndarray  # the source's masses: the area each node stands for (_area)
+    wy: np.ndarray  # the target's, scaled to the source's total
+    near: np.ndarray  # each source node's _AVERAGE nearest nodes (_nearest)
+    reuse: bool  # every level's graphs kept for _REGRAPH rounds, not only the largest
+
+
+def measures(x: np.ndarray, y: np.ndarray, reuse: bool = False) -> Measures:
+    """:class:`Measures` of the source ``x`` and the target ``y``, the same for every
+    :func:`refine` of them, for a caller that refines one pair more than once; ``reuse``:
+    keep every level's transport graph for ``_REGRAPH`` rounds (a large set: the caller's
+    choice), not only the graphs of more than ``_MANY_POINTS`` points a side."""
+    spacing = cKDTree(y).query(y, k=2, workers=blas_threads(len(y)))[0][:, 1].mean()
+    wx, near = _nearest(x)
+    return Measures(float(spacing), wx, _area(y) * (len(x) / len(y)), near, reuse)
+
+
 def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
-           levels: int | None = None, smoothing: float = _WIDTH, decay: float = 0.0
-           ) -> np.ndarray:
+           levels: int | None = None, smoothing: float = _WIDTH, decay: float = 0.0,
+           known: Measures | None = None) -> np.ndarray:
     """Where the source lands on the target, refined coarse to fine.
 
     The first level summarises the target in cubes of about ``4 * start`` node counts'
@@ -239,6 +261,8 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
         their best affine map (:func:`_affine`) shrinks (0, the default: none): the
         affine map takes the pose instead of a smooth field that can hold a turn as
         well (:mod:`modalmorph.matching`, ``POSE_DECAY``).
+    known : Measures, optional
+        :func:`measures` of ``x`` and ``y`` (found here, ``reuse`` False, when not given).
 
     Returns
     -------
@@ -246,9 +270,8 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
         The refined positions of the source nodes.
     """
     m, n = len(x), len(y)
-    spacing = cKDTree(y).query(y, k=2)[0][:, 1].mean()
+    spacing, wx, wy, near, reuse = measures(x, y) if known is None else known
     width = spacing * np.sqrt(n / max(start, 1))  # a source of under 4 nodes: start 0
-    wx, wy = _area(x), _area(y) * (m / n)  # the masses: the area each node stands for
     for level in count(1):
         width = max(width / _STEP, spacing)
         if width == spacing:
@@ -262,7 +285,7 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
         graph = None
         for i in range(rounds):
             zc = z if width == spacing else _means(label, z, wx)[0]
-            if max(len(mu), len(nu)) > _MANY_POINTS and i % _REGRAPH == 0:
+            if (reuse or max(len(mu), len(nu)) > _MANY_POINTS) and i % _REGRAPH == 0:
                 graph = _graph(zc, yc)
             zt, share = _transport(zc, mu, yc, nu, _TEMPERATURE * width, graph)
             z = z + _OVERRELAX * smooth(zt - zc, share)
@@ -270,7 +293,7 @@ def refine(x: np.ndarray, z: np.ndarray, y: np.ndarray, start: int, *,
                 pose = _affine(x, z)
                 z = pose + (1.0 - decay) * (z - pose)
         if width == spacing:
-            return _average(x, z)
+            return _average(x, z, near)
         if level == levels:
             return z
 
@@ -334,26 +357,35 @@ def stretch(z: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.c_[z, np.ones(len(z))] @ affine
 
 
+def _nearest(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_area` of the points ``p`` (k, 3), and the indices of each one's ``_AVERAGE``
+    nearest points (itself first) for :func:`_average`: one k-d tree query for both."""
+    k = min(max(_AREA_NEIGHBOURS, _AVERAGE), len(p))
+    dist, near = cKDTree(p).query(p, k=k, workers=blas_threads(len(p)))
+    dist, near = dist.reshape(len(p), k), near.reshape(len(p), k)
+    if len(p) <= _AREA_NEIGHBOURS:
+        return np.ones(len(p)), near[:, :_AVERAGE]
+    area = dist[:, _AREA_NEIGHBOURS - 1] ** 2
+    return area / area.mean(), near[:, :_AVERAGE]
+
+
 def _area(p: np.ndarray) -> np.ndarray:
     """The share of the surface each point stands for, mean 1, (k,): the squared distance
     to its ``_AREA_NEIGHBOURS``-th nearest point (1 for every point of a set too small)."""
-    if len(p) <= _AREA_NEIGHBOURS:
-        return np.ones(len(p))
-    r = cKDTree(p).query(p, k=[_AREA_NEIGHBOURS], workers=blas_threads(len(p)))[0][:, 0]
-    area = r**2
-    return area / area.mean()
+    return _nearest(p)[0]
 
 
-def _average(x: np.ndarray, z: np.ndarray) -> np.ndarray:
+def _average(x: np.ndarray, z: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
     """The landings ``z`` (m, 3) of the nodes ``x`` (m, 3) with each node's move beyond
     the best affine map (least squares) replaced by its mean over the node's ``_AVERAGE``
-    nearest nodes in ``x``, ``_AVERAGE_PASSES`` times; an affine map is left exactly as
+    nearest nodes in ``x`` (``near``, :func:`_nearest`'s, found here when not given),
+    ``_AVERAGE_PASSES`` times; an affine map is left exactly as
     it is (the mean of a stretch over a curved patch lies inside it: averaged beyond the
     best similarity, a sphere of 162 nodes stretched onto an ellipsoid (2, 1, 0.5)
     landed 1.5, not 2, along it, its tips unpaired)."""
     base = _affine(x, z)
-    k = min(_AVERAGE, len(x))
-    near = cKDTree(x).query(x, k=k)[1].reshape(len(x), k)
+    near = _nearest(x)[1] if near is None else near
+    k = near.shape[1]
     mean = csr_matrix((np.full(near.size, 1.0 / k), near.ravel(),
                        np.arange(0, near.size + 1, k)), shape=(len(x), len(x)))
     move = z - base
