@@ -115,10 +115,13 @@ def make_pair(family, rng):
     if family in WARP:
         tgt = _warp(tgt, WARP[family], rng)
     if family in ("noise", "combined"):  # drawn again where it makes the contour cross
-        clean = tgt  # itself (a loop of 4-8 nodes: refused by match, as any such input)
-        tgt = clean + 0.02 * size * rng.standard_normal(tgt.shape)
-        while self_crossings(tgt):
+        clean = tgt  # itself (a loop of 4-8 nodes: refused by match, as any such input;
+        for _ in range(100):  # so the noise is that of simple contours, since session 16)
             tgt = clean + 0.02 * size * rng.standard_normal(tgt.shape)
+            if not self_crossings(tgt):
+                break
+        else:
+            raise RuntimeError("100 draws of the noise all crossed the contour")
     if family in ("rotation", "combined"):
         t = rng.uniform(-np.pi, np.pi)
         R = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])

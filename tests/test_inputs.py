@@ -117,7 +117,6 @@ def test_every_shape_file_keeps_the_frame_it_was_written_in(tmp_path, ext):
 
 @pytest.mark.parametrize(("name", "body"), [
     ("f.json", '{"points": [[0, 0], [1, 0], [0, 1]], "frame": {"y_down": "yes"}}'),
-    ("g.json", '{"points": [[0, 0], [1, 0], [0, 1]], "frame": [true]}'),
     ("h.json", '{"points": [[0, 0], [1, 0], [0, 1]], "frame": {"y_down": true, "unit": 3}}')])
 def test_a_frame_said_wrongly_is_named(tmp_path, name, body):
     (tmp_path / name).write_text(body)
@@ -125,6 +124,14 @@ def test_a_frame_said_wrongly_is_named(tmp_path, name, body):
 
     with pytest.raises(InputFileError, match="y_down|frame|unit"):
         read_shape(tmp_path / name)
+
+
+def test_a_json_frame_that_is_not_ours_is_left_alone(tmp_path):
+    """Annotation exports write a frame's index under "frame": read as before (y up)."""
+    for value in ("12", "null", "[true]"):
+        (tmp_path / "f.json").write_text('{"points": [[0, 0], [1, 0], [0, 1]], "frame": '
+                                         + value + "}")
+        assert not y_down(read_shape(tmp_path / "f.json"))
 
 
 def test_an_open_curve_in_a_point_file_is_said_and_read_open_when_told(tmp_path):
@@ -141,6 +148,16 @@ def test_an_open_curve_in_a_point_file_is_said_and_read_open_when_told(tmp_path)
         assert not read_shape(stroke, open_curves=True).closed
         assert not read_shape(stroke, closed=False).closed
         read_shape(_write_csv(tmp_path / "p.csv", _glyph_p()))
+        # files that say, and outlines traced on a drawing, stay as they say (review18)
+        assert read_shape(_write_svg(tmp_path / "p.svg", _glyph_p()), open_curves=True).closed
+        (tmp_path / "c.json").write_text('{"points": [[0, 0], [1, 0], [0, 1]], "closed": true}')
+        assert read_shape(tmp_path / "c.json", open_curves=True).closed
+    from modalmorph.core.shape import ImageFrame
+    from modalmorph.io import write_points
+
+    write_points(tmp_path / "down.csv", np.c_[x, 0.003 * x**2], frame=ImageFrame())
+    with pytest.warns(UserWarning, match="down.csv: the contour is closed by an edge"):
+        read_shape(tmp_path / "down.csv")  # a point file in image coordinates says it too
 
 
 def test_mixed_y_directions_warn_once_and_flip_y_mirrors(tmp_path):

@@ -146,9 +146,9 @@ def test_turned_shape_still_found():
 @pytest.mark.parametrize("ch", ["F", "L"])
 @pytest.mark.parametrize("degrees", [-30.0, 34.0])
 def test_a_turn_beyond_the_common_frame_is_found(ch, degrees):
-    """A glyph of one font onto the other's turned by 30-34 degrees, more than the common
-    frame's 20: rotation='auto' pairs the nodes as without the turn (median 1 node of
-    120 off at most; the common frame was kept before, and 'L' slid 7 nodes)."""
+    """A glyph of one font onto the other's turned by 30-34 degrees, more than
+    ``_TURN_BEYOND``'s 25: rotation='auto' pairs the nodes as without the turn (median 1
+    node of 120 off at most; the common frame was kept before, and 'L' slid 7 nodes)."""
     a = resample(_glyph(ch, "DejaVu Sans"), 120)
     b = resample(_glyph(ch, "DejaVu Serif"), 120)
     t = np.radians(degrees)
@@ -180,6 +180,30 @@ def test_a_circle_onto_a_needle_is_matched():
     needle = _circle(100, 50, 0.05)
     result = mm.morph(_circle(100, 10, 10), needle)
     assert len(result.matching.pairs) > 2 and np.isfinite(result.distance)
+
+
+@pytest.mark.skipif(not SHARED.is_dir(), reason="needs ../shared/data/heart")
+@pytest.mark.parametrize("es, ed, n", [("SC-HF-NI-03-0049", "SC-HF-NI-03-0060", 150),
+                                       ("SC-HF-NI-03-0109", "SC-HF-NI-03-0120", 60)])
+def test_a_heart_in_its_frame_is_not_turned_by_the_turn_rule(es, ed, n):
+    """Hearts whose turned alternative lies 20.0-20.7 degrees off and fits better: with
+    the turn taken beyond 20 degrees their pairs turned by 20 degrees (review18); beyond
+    ``_TURN_BEYOND`` (25) they stay in their frame."""
+    def read(name):
+        return resample(np.loadtxt(SHARED / f"{name}.csv", delimiter=",", skiprows=1), n)
+
+    a, b = read(es), read(ed)
+    assert abs(correspondence_rotation(a, b, mm.match(a, b).pairs)) < 5.0
+
+
+@pytest.mark.parametrize("scale", [1.0, 0.5, 100.0])
+@pytest.mark.parametrize("corners", [6, 24])
+def test_a_regular_polygon_onto_itself_is_matched_in_place(corners, scale):
+    """A polygon onto itself fits perfectly in its frame (objective 0): the turn rule
+    divided by it (ZeroDivisionError, review18); every node is its own partner."""
+    p = scale * _polygon(corners, corners)
+    pairs = mm.match(p, p.copy()).pairs
+    assert len(pairs) == corners and np.array_equal(pairs[:, 0], pairs[:, 1])
 
 
 @pytest.mark.parametrize("factor", [1 / 1000, 1 / 3, 3.0, 1000.0])

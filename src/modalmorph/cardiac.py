@@ -273,8 +273,8 @@ def rounding_stretch(endo: np.ndarray) -> np.ndarray:
     """The area-keeping linear map (2, 2) that takes a circle to the ellipse of the same
     second moments as the area inside ``endo`` (m, 2): symmetric, determinant 1; the
     identity for a circle. ``correspondence="normal"`` tracks the walls mapped by its
-    inverse (the reference endocardium made round), where the normals of an elliptical
-    wall are its rays from the centre (:data:`ROUNDING`)."""
+    inverse (frame 0's endocardium, where the tracks start, made round), where the
+    normals of an elliptical wall are its rays from the centre (:data:`ROUNDING`)."""
     x, y = (endo - polygon_centroid(endo)).T
     xn, yn = np.roll(x, -1), np.roll(y, -1)
     cross = x * yn - xn * y
@@ -554,11 +554,11 @@ def _ring_object(wall: np.ndarray, opts: StrainOptions, name: str, say) -> np.nd
 
     labels, count = label(wall, connectivity=2, return_num=True)  # io's numbering
     area = np.bincount(labels.ravel(), minlength=count + 1)[1:]
-    ringed = [k for k in np.argsort(-area) if _largest_hole(labels == k + 1).any()] \
-        if opts.object == "largest" and not opts.endo_only and count > 1 else []
-    if not ringed or ringed[0] == np.argmax(area):
+    ringed = (k for k in np.argsort(-area) if _largest_hole(labels == k + 1).any()) \
+        if opts.object == "largest" and not opts.endo_only and count > 1 else iter(())
+    pick, largest = int(next(ringed, -1)), int(np.argmax(area))  # the first hit only
+    if pick < 0 or pick == largest:
         return choose_objects(wall, opts.object, name, connectivity=2, say=say)[0]
-    pick, largest = int(ringed[0]), int(np.argmax(area))
     say(f"{name}: object {pick + 1} of {count} (the largest with a hole, a wall; object "
         f"{largest + 1}, {area[largest]} px, has none): {area[pick]} px; object= chooses "
         f"another")

@@ -163,8 +163,9 @@ def read_shape(path, options: ReadOptions | None = None, *, closed: bool | None 
         then ``max(DEFAULT_NODES, m)``, logged), and :data:`DEFAULT_NODES` for images and
         SVG; not allowed for 3D shapes), ``flip_y`` (2D point files: mirror y into image
         coordinates, y down, as images and SVG: for inputs mixing the two),
-        ``open_curves`` (2D contours are open curves; a point file that does not say and
-        whose closing edge is over :data:`OPEN_LOOKING` times its median edge warns),
+        ``open_curves`` (the contours of a point file that does not say are open curves;
+        closed, such a file whose closing edge is over :data:`OPEN_LOOKING` times its
+        median edge warns),
         ``threshold`` (images only: grey level separating the object from the
         background, in the image's own units, 0-255 for 8-bit images) and ``object``
         (images and SVG: which object or outline to take, ``"largest"`` (in images, not
@@ -198,13 +199,16 @@ def read_shape(path, options: ReadOptions | None = None, *, closed: bool | None 
     name = os.fspath(path)
     path = Path(path)
     raw = read_guarded(_reader(path, name, opts), path, name, opts)
-    said = closed is not None or raw.closed is not None or raw.faces is not None
+    # a point file that does not say whether it closes (not an outline traced on an image
+    # or an SVG drawing, not a mesh): open_curves decides, closed by default
+    unsaid = closed is None and raw.closed is None and raw.default_nodes is None and (
+        raw.faces is None)
     if closed is None:
-        closed = not opts.open_curves and (True if raw.closed is None else raw.closed)
+        closed = not opts.open_curves if unsaid else raw.closed is not False
     pts, contours = raw.points, raw.contours
     if raw.drop_closing_repeat and raw.faces is None:
         pts, contours = _drop_repeats(pts, contours, name)
-    if closed and not said and raw.frame is None:  # a point file that does not say
+    if closed and unsaid:
         looks_open(name, pts, contours)
     frame = raw.frame
     if opts.flip_y and frame is None and pts.ndim == 2 and pts.shape[1] == 2:

@@ -293,11 +293,9 @@ def read_json(path: Path, name: str, options: ReadOptions) -> RawShape:
         if data.get("faces") is not None:
             faces = _faces(name, data["faces"])
         contours = _contours(name, data.get("contours"))
-        declared = data.get("frame", {})
-        if not isinstance(declared, dict):
-            raise InputFileError(f"{name}: \"frame\" must be an object such as "
-                                 f"{{\"y_down\": true, \"unit\": \"px\"}}")
-        frame = _declared(name, declared.get("y_down", False), declared.get("unit"))
+        declared = data.get("frame")  # other tools write a frame's index there: not ours
+        if isinstance(declared, dict):
+            frame = _declared(name, declared.get("y_down", False), declared.get("unit"))
         data = data["points"]
     if not isinstance(data, list) or not all(isinstance(row, list) for row in data):
         raise InputFileError(f"{name}: expected a list of [x, y] or [x, y, z] lists")

@@ -37,7 +37,7 @@ _COARSE_NODES_CLOUD = 256  # the same for point sets, which have 4 poses only (n
 _ANGLES = 24  # rotations tried by the pose search in 2D (not measured)
 _POSE_BATCH = 4  # rotations searched at once by the branch and bound (speed; not measured)
 _POSE_ROUNDS = 2  # rigid rounds per point-set pose: after one a wrong pose can cost less
-COMMON_ANGLE = 20.0  # degrees: poses this near the identity are the common frame (method.md §2)
+COMMON_ANGLE = 20.0  # degrees: poses this near the identity are the common frame (not measured)
 _SMALL_TURNS = (-10.0, 10.0)  # degrees, 2D common-frame poses besides the identity (not measured)
 _TURN_EVIDENCE = 7.5  # degrees: a turn below it is no turn (candidates 10 degrees apart)
 _COMMON_MARGIN = 2.0  # common frame / best total: shared hearts <= 1.51, turned hands >= 1.65
@@ -371,9 +371,9 @@ def _surface_pose(p: Problem, costs: Costs, sub: np.ndarray, modal: Similarity) 
              if score <= _CLOSE * low]
     totals = [trusted_pairs(costs, sim.apply(costs.x), sub)[1] for sim in close]
     best = int(np.argmin(totals))
-    turned = p.rotation == "auto" and _turn(close[best]) > COMMON_ANGLE
+    turned = p.rotation == "auto" and close[best].angle > COMMON_ANGLE
     if p.rotation == "auto":  # the common frame, as in 2D: kept unless far costlier
-        near = [k for k, s in enumerate(close) if _turn(s) <= COMMON_ANGLE]
+        near = [k for k, s in enumerate(close) if s.angle <= COMMON_ANGLE]
         if near and min(totals[k] for k in near) <= _COMMON_MARGIN * totals[best]:
             best, turned = min(near, key=totals.__getitem__), False
     sim = _trimmed_icp(x, y, close[best], trim, rotate)[1]
@@ -391,11 +391,6 @@ def _farthest(sim: Similarity, x: np.ndarray, y: np.ndarray) -> float:
     shows, which a mean hides."""
     z = sim.apply(x)
     return float(max(cKDTree(y).query(z)[0].max(), cKDTree(z).query(y)[0].max()))
-
-
-def _turn(sim: Similarity) -> float:
-    """The angle of a 3D similarity's rotation, degrees."""
-    return float(np.degrees(Rotation.from_matrix(sim.rotation).magnitude()))
 
 
 def _rigid_rounds(costs: Costs, sub: np.ndarray, sim: Similarity, rotate: bool

@@ -47,8 +47,8 @@ class MatchOptions(Options):
         "pairs rejected", group="matching", kind="str", choices=METHODS)
     rotation: str = option(
         "auto", "auto: keep the common frame of the two inputs unless another pose fits "
-        "clearly better, or better at all with a turn of more than 20 degrees (a turn "
-        "of 10-20 degrees between two different shapes is partly taken for deformation: "
+        "clearly better, or better at all with a turn of more than 25 degrees (a turn "
+        "of 10-25 degrees between two different shapes is partly taken for deformation: "
         "pass free); none: the "
         "inputs share one frame (frames of a sequence, ED/ES of one slice), never turn; "
         "free: any pose, by cost alone", group="matching", kind="str", choices=ROTATIONS)
@@ -221,9 +221,10 @@ class ReadOptions(Options):
         group="input", kind="int")
 
     open_curves: bool = option(
-        False, "the contours of 2D files are open curves (a centreline, a pen stroke), "
-        "not closed outlines (the default; an SVG path without Z and a JSON or NPZ "
-        "'closed' say it themselves)", group="input", kind="bool")
+        False, "the contours of point files (CSV, TSV, TXT, NPY; JSON and NPZ without "
+        "'closed') are open curves (a centreline, a pen stroke), not closed outlines (the "
+        "default); images, SVG and files that say are read as they say", group="input",
+        kind="bool")
     flip_y: bool = option(
         False, "mirror the y of 2D point files (CSV, TSV, TXT, NPY, NPZ, JSON: y up) into "
         "image coordinates (y down, as images and SVG), for inputs mixing the two; the "
