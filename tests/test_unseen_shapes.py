@@ -206,6 +206,20 @@ def test_a_regular_polygon_onto_itself_is_matched_in_place(corners, scale):
     assert len(pairs) == corners and np.array_equal(pairs[:, 0], pairs[:, 1])
 
 
+@pytest.mark.parametrize("k, n", [(5, 25), (5, 40), (5, 55), (2, 20), (3, 30)])
+def test_a_symmetric_star_turned_a_little_keeps_its_frame(k, n):
+    """A k-fold star sampled k-fold, turned 3 degrees: the pose candidates lie 10 degrees
+    apart and a symmetric one (72 degrees on) fitted best; it was paired there (review18).
+    The common frame's pose, turned within the frame, fits as near: each node pairs with
+    its own."""
+    t = 2 * np.pi * np.arange(n) / n
+    p = np.c_[np.cos(t), np.sin(t)] * (1 + 0.25 * np.cos(k * t))[:, None]
+    a = np.radians(3.0)
+    pairs = mm.match(p, p @ np.array([[np.cos(a), np.sin(a)], [-np.sin(a), np.cos(a)]])).pairs
+    off = np.minimum((pairs[:, 1] - pairs[:, 0]) % n, (pairs[:, 0] - pairs[:, 1]) % n)
+    assert np.median(off) <= 1
+
+
 @pytest.mark.parametrize("factor", [1 / 1000, 1 / 3, 3.0, 1000.0])
 def test_any_size_ratio(factor):
     """A pure size change is not a deformation: with the similarity motions free it
