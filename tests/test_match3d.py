@@ -293,3 +293,19 @@ def test_refine_measures_once_and_reused_graphs():
         return np.median(np.linalg.norm(landed - z, axis=1)) / h
 
     assert error(kept) <= error(plain) + 0.01
+
+
+def test_a_cloud_onto_a_needle_is_refused_with_its_reason():
+    """30 points of a sphere onto 300 of a needle (5 x 0.01 x 0.01): the pose's nearest-point
+    rounds fitted a similarity to one source node and raised 'source_points all coincide'
+    (review18); the matcher now says how few nodes land near the target."""
+    from modalmorph.errors import ShapeError
+
+    rng = np.random.default_rng(0)
+    sphere = rng.standard_normal((30, 3))
+    sphere /= np.linalg.norm(sphere, axis=1, keepdims=True)
+    needle = rng.standard_normal((300, 3))
+    needle = needle / np.linalg.norm(needle, axis=1, keepdims=True) * [5.0, 0.01, 0.01]
+    with pytest.raises(ShapeError, match="land within"):
+        mm.match(sphere, needle)
+

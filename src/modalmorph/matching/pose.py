@@ -297,10 +297,10 @@ def _trimmed_icp(x: np.ndarray, y: np.ndarray, sim: Similarity, trim: float,
         ds, js = ty.query(z)
         dt, it = cKDTree(z).query(y)
         near_s, near_t = ds <= cut, dt <= cut
-        if near_s.sum() + near_t.sum() < 4:
+        rows = np.r_[np.flatnonzero(near_s), it[near_t]]
+        if len(rows) < 4 or np.all(rows == rows[0]):  # one source node near: no fit
             break
-        sim = align(np.r_[x[near_s], x[it[near_t]]], np.r_[y[js[near_s]], y[near_t]],
-                    rotate=rotate)
+        sim = align(x[rows], np.r_[y[js[near_s]], y[near_t]], rotate=rotate)
         cut = max(cut * shrink, trim)
     return surface_gap(sim.apply(x), y, trim, tree=ty), sim
 
