@@ -34,6 +34,17 @@ def _write(tmp_path, name: str, text: str):
     return path
 
 
+def _reading(path, errors: list):
+    """A call reading ``path`` that keeps the message of an InputFileError in ``errors``
+    (run on a thread, where an exception would be lost)."""
+    def read():
+        try:
+            read_shape(path)
+        except InputFileError as exc:
+            errors.append(str(exc))
+    return read
+
+
 def _expanded_by_svgelements(path) -> int:
     """The elements svgelements' structure pass yields (its own expansion of <use>)."""
     return sum(event == "start" for _, event, _ in se.SVG._use_structure_parse(str(path)))
@@ -61,12 +72,7 @@ def test_svg_use_fanout_is_refused_by_its_count_before_it_is_drawn(tmp_path, mon
 
     monkeypatch.setattr(se.SVG, "parse", drawn)
     errors = []
-
-    def read():
-        try:
-            read_shape(path)
-        except InputFileError as exc:
-            errors.append(str(exc))
+    read = _reading(path, errors)
 
     if on_thread:
         thread = threading.Thread(target=read)
@@ -138,12 +144,7 @@ def test_image_over_pillows_bound_is_refused_while_another_thread_resets_warning
     monkeypatch.setattr(Image, "open", open_later)
     monkeypatch.setattr(ImageFile.ImageFile, "load", load)
     errors = []
-
-    def read():
-        try:
-            read_shape(path)
-        except InputFileError as exc:
-            errors.append(str(exc))
+    read = _reading(path, errors)
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the process's filters: warnings not raised
