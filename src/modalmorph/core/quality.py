@@ -260,8 +260,8 @@ def check_flat(points, name: str) -> None:
     if not spread[-1] > FLAT * spread[0]:
         raise ShapeError(f"{name}: a closed contour with no area (its nodes lie on one "
                          "line): a closed contour must enclose an area; for an open curve "
-                         "pass Shape(points, closed=False), or in a file JSON "
-                         "{\"closed\": false} or an NPZ 'closed' array")
+                         "pass Shape(points, closed=False), or read the file with "
+                         "open_curves=True")
 
 
 def check_simple(points, name: str, closed: bool = True) -> None:
