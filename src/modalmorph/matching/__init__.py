@@ -73,8 +73,8 @@ from .features import (
     reflected,
 )
 from .mirror import MIRROR, MIRROR_EXACT, MIRROR_SUSPECT, mirror_ratio
-from .pose import cloud_pose, contour_pose, surface_gap
-from .search import Costs, final_pairs, mutual_best, plausible, widened
+from .pose import cloud_pose, contour_pose, surface_gap, widened
+from .search import Costs, final_pairs, mutual_best, plausible
 
 __all__ = ["Matching", "match", "modal_features", "affinity", "DEFAULT_MODES",
            "FEATURE_SIGMA", "METHODS", "ROTATIONS", "MIRROR", "MIRROR_EXACT", "MIRROR_SUSPECT"]

@@ -11,7 +11,8 @@ assignment and alignment (:func:`cloud_pose`). The outcome is a :class:`Pose`.
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -30,7 +31,7 @@ from .search import (
     trusted_pairs,
 )
 
-__all__ = ["Pose", "contour_pose", "cloud_pose", "surface_gap"]
+__all__ = ["Pose", "contour_pose", "cloud_pose", "surface_gap", "widened"]
 
 _COARSE_NODES = 64  # nodes of each contour in the pose search (not measured)
 _COARSE_NODES_CLOUD = 256  # the same for point sets, which have 4 poses only (not measured)
@@ -229,11 +230,7 @@ def _as_near(z_common: np.ndarray, z_best: np.ndarray, y: np.ndarray) -> bool:
     symmetric outline fits alike in its symmetric poses, and only the signatures'
     rounding tells them apart)."""
     tree = cKDTree(y)
-
-    def gap(z):
-        d_zy, d_yz = tree.query(z)[0], cKDTree(z).query(y)[0]
-        return np.mean(d_zy**2) + np.mean(d_yz**2)
-
+    gap = partial(surface_gap, y=y, trim=np.inf, tree=tree)
     common = min(gap(z_common), gap(_turned_in_frame(z_common, y, tree)))
     return bool(common <= _COMMON_GAP**2 * gap(z_best))
 
@@ -318,6 +315,14 @@ def surface_gap(z: np.ndarray, y: np.ndarray, trim: float, *, tree=None) -> floa
     ds = (cKDTree(y) if tree is None else tree).query(z)[0]
     dt = cKDTree(z).query(y)[0]
     return float(np.mean(np.minimum(ds, trim) ** 2) + np.mean(np.minimum(dt, trim) ** 2))
+
+
+def widened(costs: Costs, sim: Similarity) -> Costs:
+    """``costs`` with distances in units of the source's misfit placed by ``sim`` (the
+    root mean square of both ways' nearest-node distances) where that exceeds the
+    target's spacing: for shapes so unlike (a circle onto a needle) that no pair lies
+    within ``SKIP`` of the target's."""
+    return replace(costs, h2=max(costs.h2, surface_gap(sim.apply(costs.x), costs.y, np.inf) / 2))
 
 
 def _even_turns(n: int) -> np.ndarray:

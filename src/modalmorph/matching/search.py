@@ -12,18 +12,17 @@ which go round a closed target once).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from scipy.spatial import cKDTree
 
 from .features import sq_dist
 
 __all__ = ["SKIP", "REPEAT", "mutual_best", "plausible", "monotone_totals",
            "ordered_pairs", "Costs", "pairs_at", "trusted_pairs", "total", "objective",
-           "final_pairs", "widened"]
+           "final_pairs"]
 
 # The default search's costs, in squared target node spacings.
 SKIP = 16.0  # leaving a source node unmatched (not measured)
@@ -157,16 +156,6 @@ class Costs:
         """The target nodes' squared norms (n,), as ``sq_dist`` sums them (made once for
         the alternation's rounds)."""
         return np.add.reduce(self.y**2, axis=1)
-
-
-def widened(costs: Costs, sim) -> Costs:
-    """``costs`` with distances in units of the source's misfit placed by ``sim`` (the
-    root mean square of both ways' nearest-node distances) where that exceeds the
-    target's spacing: for shapes so unlike (a circle onto a needle, a coarse source onto a
-    target 20 times denser) that no pair lies within :data:`SKIP` of the target's."""
-    z = sim.apply(costs.x)
-    gap = np.mean(cKDTree(costs.y).query(z)[0] ** 2) + np.mean(cKDTree(z).query(costs.y)[0] ** 2)
-    return replace(costs, h2=max(costs.h2, gap / 2))
 
 
 def pairs_at(costs: Costs, z: np.ndarray, rows: np.ndarray):
