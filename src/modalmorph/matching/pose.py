@@ -58,9 +58,9 @@ _COMMON_MARGIN = 2.0  # common frame / best total: shared hearts <= 1.51, turned
 # 1.03-1.56): the farthest of both ways' nearest distances must also lie within
 # _COMMON_FARTHEST of the turned pose's (the knob 1.59-3.89; the stretched bodies 0.48-1.00).
 _COMMON_GAP = 1.05
-_FRAME_ROUNDS = 3  # Procrustes rounds turning the common frame's pose for _as_near (not measured)
 _COMMON_GAP_3D = 1.6
 _COMMON_FARTHEST = 1.25
+_FRAME_ROUNDS = 3  # Procrustes rounds turning the common frame's pose for _as_near (not measured)
 # 3D point sets: trimmed nearest-point rounds (ICP) from many starts on few nodes, the
 # best few again on more nodes; the trimming distance shrinks from the size (normalised:
 # 1) to _TRIM coarse spacings. Measured on benchmarks/match3d.py, 1000 points, medians in
@@ -246,7 +246,8 @@ def _turned_in_frame(z: np.ndarray, y: np.ndarray, tree) -> np.ndarray:
         zr = z @ rot
         u, _, vt = np.linalg.svd(zr.T @ y[tree.query(zr)[1]])
         turn = rot @ u @ vt  # zr @ (u vt) nearest the partners (orthogonal Procrustes)
-        if np.linalg.det(turn) < 0 or Similarity(turn, 1.0, z[0] * 0).angle > COMMON_ANGLE:
+        angle = Similarity(turn, 1.0, np.zeros(len(turn))).angle
+        if np.linalg.det(turn) < 0 or angle > COMMON_ANGLE:
             break
         rot = turn
     return z @ rot
